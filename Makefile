@@ -1,0 +1,35 @@
+# layerpilot: `make demo` and `make test` do all set-up on a fresh Debian machine (as root).
+SHELL := /bin/bash
+APT_PACKAGES := g++ make cmake git python3 python3-venv python3-dev \
+  liboctomap-dev libeigen3-dev octomap-tools protobuf-compiler \
+  libegl1 libegl-mesa0 libgl1-mesa-dri
+VENV := .venv
+PY := $(VENV)/bin/python
+SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*)
+
+.PHONY: demo test system build clean
+
+demo: build
+	$(VENV)/bin/layerpilot demo
+
+test: build
+	$(PY) -m pytest -q
+
+build: system $(VENV)/.installed
+
+# Installs only the Debian packages that are missing (so a ready machine needs no root).
+system:
+	@missing=$$(for p in $(APT_PACKAGES); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:" $$missing; \
+	  apt-get update -qq && apt-get -o DPkg::Lock::Timeout=120 install -y -qq $$missing; \
+	fi
+
+$(VENV)/.installed: $(SOURCES)
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+clean:
+	rm -rf build $(VENV)

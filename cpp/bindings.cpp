@@ -1,0 +1,161 @@
+// Thin pybind11 layer (`layerpilot._core`): argument checks live in Python (layerpilot.map),
+// arrays leave C++ without copies, and the GIL is released while the map works.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <octomap/OcTree.h>
+
+#include <chrono>
+
+#include "voxel_map.hpp"
+
+namespace py = pybind11;
+using namespace layerpilot;
+
+namespace {
+
+template <class T>
+py::array_t<T> toArray(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
+  auto* owned = new std::vector<T>(std::move(v));
+  py::capsule free_when_done(owned, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(shape, owned->data(), free_when_done);
+}
+
+using FloatArray = py::array_t<float, py::array::c_style>;
+using DoubleArray = py::array_t<double, py::array::c_style>;
+using ByteArray = py::array_t<uint8_t, py::array::c_style>;
+
+py::dict agreementDict(const Agreement& a) {
+  py::dict d;
+  d["agree"] = a.agree;
+  d["either"] = a.either;
+  d["only_a"] = a.only_a;
+  d["only_b"] = a.only_b;
+  d["occupied_a"] = a.occupied_a;
+  d["occupied_b"] = a.occupied_b;
+  return d;
+}
+
+// Stock OctoMap, linked from the same Debian library: the reference for benchmarks and tests.
+struct ReferenceOcTree {
+  octomap::OcTree tree;
+  explicit ReferenceOcTree(double resolution) : tree(resolution) {}
+
+  double insert(const FloatArray& points, const DoubleArray& origin, double max_range, bool discretize) {
+    octomap::Pointcloud cloud;
+    cloud.reserve(points.shape(0));
+    const float* p = points.data();
+    for (py::ssize_t i = 0; i < points.shape(0); ++i) cloud.push_back(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+    const octomap::point3d o(origin.at(0), origin.at(1), origin.at(2));
+    py::gil_scoped_release release;
+    auto t0 = std::chrono::steady_clock::now();
+    tree.insertPointCloud(cloud, o, max_range, false, discretize);
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+};
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "layerpilot C++ core: attribute octree on OctoMap with a column index";
+
+  py::class_<SensorModel>(m, "_SensorModel")
+      .def(py::init<>())
+      .def_readwrite("prob_hit", &SensorModel::prob_hit)
+      .def_readwrite("prob_miss", &SensorModel::prob_miss)
+      .def_readwrite("clamp_min", &SensorModel::clamp_min)
+      .def_readwrite("clamp_max", &SensorModel::clamp_max)
+      .def_readwrite("occupied_threshold", &SensorModel::occupied_threshold);
+
+  py::class_<VoxelMap>(m, "_VoxelMap")
+      .def(py::init<double, const SensorModel&>())
+      .def_static("load", &VoxelMap::load, py::call_guard<py::gil_scoped_release>())
+      .def_property_readonly("resolution", &VoxelMap::resolution)
+      .def("insert",
+           [](VoxelMap& map, const FloatArray& points, const DoubleArray& origin, std::optional<ByteArray> colors,
+              double stamp, double max_range) {
+             const uint8_t* rgb = colors ? colors->data() : nullptr;
+             InsertResult r;
+             {
+               py::gil_scoped_release release;
+               r = map.insert(points.data(), points.shape(0), rgb, origin.data(), stamp, max_range);
+             }
+             return py::make_tuple(r.points_used, r.points_dropped, r.voxels_updated, r.voxels_occupied);
+           })
+      .def("column_layers",
+           [](const VoxelMap& map, int64_t kx, int64_t ky, int width, int height) {
+             ColumnWindow w;
+             {
+               py::gil_scoped_release release;
+               w = map.columnLayers(kx, ky, width, height);
+             }
+             const py::ssize_t h = height, wd = width;
+             return py::make_tuple(toArray(std::move(w.observed), {h, wd}), toArray(std::move(w.elevation), {h, wd}),
+                                   toArray(std::move(w.color), {h, wd, 3}), toArray(std::move(w.last_seen), {h, wd}),
+                                   toArray(std::move(w.min_distance), {h, wd}));
+           })
+      .def("occupancy",
+           [](const VoxelMap& map, const DoubleArray& points) {
+             std::vector<float> out;
+             {
+               py::gil_scoped_release release;
+               out = map.occupancy(points.data(), points.shape(0));
+             }
+             return toArray(std::move(out), {static_cast<py::ssize_t>(points.shape(0))});
+           })
+      .def("raycast",
+           [](const VoxelMap& map, const DoubleArray& origin, const DoubleArray& direction,
+              double max_range) -> std::optional<std::tuple<double, double, double>> {
+             double hit[3];
+             py::gil_scoped_release release;
+             if (!map.raycast(origin.data(), direction.data(), max_range, hit)) return std::nullopt;
+             return std::make_tuple(hit[0], hit[1], hit[2]);
+           })
+      .def("voxels",
+           [](const VoxelMap& map, const DoubleArray& lo, const DoubleArray& hi, double min_occupancy) {
+             VoxelSet s;
+             {
+               py::gil_scoped_release release;
+               s = map.voxels(lo.data(), hi.data(), min_occupancy);
+             }
+             const py::ssize_t n = s.size();
+             return py::make_tuple(toArray(std::move(s.centers), {n, 3}), toArray(std::move(s.occupancy), {n}),
+                                   toArray(std::move(s.color), {n, 3}), toArray(std::move(s.last_seen), {n}),
+                                   toArray(std::move(s.min_distance), {n}));
+           })
+      .def("save", &VoxelMap::save, py::call_guard<py::gil_scoped_release>())
+      .def("export_bt", &VoxelMap::exportBt, py::call_guard<py::gil_scoped_release>())
+      .def("stats", [](const VoxelMap& map) {
+        MapStats s;
+        {
+          py::gil_scoped_release release;
+          s = map.stats();
+        }
+        py::dict d;
+        d["resolution"] = s.resolution;
+        d["nodes"] = s.nodes;
+        d["leaves"] = s.leaves;
+        d["occupied_leaves"] = s.occupied_leaves;
+        d["tree_bytes"] = s.tree_bytes;
+        d["column_index_bytes"] = s.column_index_bytes;
+        d["node_bytes"] = s.node_bytes;
+        d["bounds_min"] = py::make_tuple(s.min[0], s.min[1], s.min[2]);
+        d["bounds_max"] = py::make_tuple(s.max[0], s.max[1], s.max[2]);
+        return d;
+      });
+
+  py::class_<ReferenceOcTree>(m, "_ReferenceOcTree")
+      .def(py::init<double>())
+      .def("insert", &ReferenceOcTree::insert, "insertPointCloud; returns milliseconds")
+      .def("leaves", [](const ReferenceOcTree& r) { return r.tree.getNumLeafNodes(); })
+      .def("write_bt", [](ReferenceOcTree& r, const std::string& path) { return r.tree.writeBinary(path); });
+
+  m.def("_agreement", [](const VoxelMap& a, const ReferenceOcTree& b) {
+    return agreementDict(a.withTree([&](const VoxelTree& t) { return agreement(t, b.tree); }));
+  });
+  m.def("_agreement", [](const VoxelMap& a, const VoxelMap& b) {
+    return agreementDict(
+        a.withTree([&](const VoxelTree& ta) { return b.withTree([&](const VoxelTree& tb) { return agreement(ta, tb); }); }));
+  });
+}

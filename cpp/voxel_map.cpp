@@ -1,0 +1,565 @@
+#include "voxel_map.hpp"
+
+#include <octomap/ColorOcTree.h>
+#include <octomap/OcTree.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <stdexcept>
+#include <thread>
+#include <cstdlib>
+
+#include "keys.hpp"
+
+namespace layerpilot {
+namespace {
+
+using octomap::OcTreeKey;
+using octomap::point3d;
+
+unsigned workerCount(size_t items) {
+  static const unsigned hw = [] {
+    const char* env = std::getenv("LAYERPILOT_THREADS");  // cap for shared machines and benchmarks
+    const unsigned n = env ? static_cast<unsigned>(std::atoi(env)) : std::thread::hardware_concurrency();
+    return std::max(1u, n);
+  }();
+  return items < 4096 ? 1u : std::min(hw, 8u);
+}
+
+// Runs f(worker, begin, end) over [0, n) split into one contiguous chunk per worker.
+template <class F>
+void parallelChunks(size_t n, unsigned workers, F&& f) {
+  std::vector<std::thread> threads;
+  for (unsigned w = 1; w < workers; ++w)
+    threads.emplace_back([&, w] { f(w, n * w / workers, n * (w + 1) / workers); });
+  f(0u, size_t(0), n / workers);
+  for (auto& t : threads) t.join();
+}
+
+// OctoMap's computeRayKeys (Amanatides & Woo) with the same float/double arithmetic, so the keys
+// match OctoMap's exactly, but with the state in registers and keys emitted to a sink.
+template <class Sink>
+bool walkRay(const VoxelTree& tree, const point3d& origin, const point3d& end, Sink&& sink) {
+  OcTreeKey key_origin, key_end;
+  if (!tree.coordToKeyChecked(origin, key_origin) || !tree.coordToKeyChecked(end, key_end)) return false;
+  if (key_origin == key_end) return true;
+  sink(key_origin[0], key_origin[1], key_origin[2]);
+  point3d direction = end - origin;
+  const float length = static_cast<float>(direction.norm());
+  direction /= length;
+  const double res = tree.getResolution();
+  int step[3];
+  double t_max[3], t_delta[3];
+  for (unsigned i = 0; i < 3; ++i) {
+    step[i] = direction(i) > 0.0 ? 1 : (direction(i) < 0.0 ? -1 : 0);
+    if (step[i] != 0) {
+      double border = tree.keyToCoord(key_origin[i]);
+      border += static_cast<float>(step[i] * res * 0.5);
+      t_max[i] = (border - origin(i)) / direction(i);
+      t_delta[i] = res / std::fabs(direction(i));
+    } else {
+      t_max[i] = t_delta[i] = std::numeric_limits<double>::max();
+    }
+  }
+  uint16_t x = key_origin[0], y = key_origin[1], z = key_origin[2];
+  double tx = t_max[0], ty = t_max[1], tz = t_max[2];
+  while (true) {
+    if (tx < ty) {
+      if (tx < tz) {
+        x += step[0];
+        tx += t_delta[0];
+      } else {
+        z += step[2];
+        tz += t_delta[2];
+      }
+    } else if (ty < tz) {
+      y += step[1];
+      ty += t_delta[1];
+    } else {
+      z += step[2];
+      tz += t_delta[2];
+    }
+    if (x == key_end[0] && y == key_end[1] && z == key_end[2]) return true;
+    if (std::min(std::min(tx, ty), tz) > length) return true;
+    sink(x, y, z);
+  }
+}
+
+inline unsigned childAt(uint64_t code, unsigned depth) { return (code >> (3 * (15 - depth))) & 7; }
+
+}  // namespace
+
+VoxelMap::VoxelMap(double resolution, const SensorModel& model) : model_(model), tree_(resolution) {
+  if (!(resolution > 0)) throw std::invalid_argument("resolution must be > 0");
+  applyModel();
+}
+
+void VoxelMap::applyModel() {
+  auto check = [](double p, const char* name) {
+    if (!(p > 0.0 && p < 1.0)) throw std::invalid_argument(std::string(name) + " must be in (0, 1)");
+  };
+  check(model_.prob_hit, "prob_hit");
+  check(model_.prob_miss, "prob_miss");
+  check(model_.clamp_min, "clamp_min");
+  check(model_.clamp_max, "clamp_max");
+  check(model_.occupied_threshold, "occupied_threshold");
+  if (model_.prob_hit <= 0.5) throw std::invalid_argument("prob_hit must be > 0.5");
+  if (model_.prob_miss >= 0.5) throw std::invalid_argument("prob_miss must be < 0.5");
+  if (model_.clamp_min >= model_.clamp_max) throw std::invalid_argument("clamp_min must be < clamp_max");
+  tree_.setProbHit(model_.prob_hit);
+  tree_.setProbMiss(model_.prob_miss);
+  tree_.setClampingThresMin(model_.clamp_min);
+  tree_.setClampingThresMax(model_.clamp_max);
+  tree_.setOccupancyThres(model_.occupied_threshold);
+  occupied_log_ = tree_.getOccupancyThresLog();
+}
+
+InsertResult VoxelMap::insert(const float* points, size_t n, const uint8_t* rgb, const double origin_d[3],
+                              double stamp, double max_range) {
+  InsertResult result;
+  const point3d origin(static_cast<float>(origin_d[0]), static_cast<float>(origin_d[1]),
+                       static_cast<float>(origin_d[2]));
+  OcTreeKey origin_key;
+  if (!tree_.coordToKeyChecked(origin, origin_key)) throw std::invalid_argument("origin is outside the map");
+
+  // 1. Collapse endpoints per voxel (one accumulator per distinct key), on every core.
+  const unsigned workers = workerCount(n);
+  std::vector<std::vector<Endpoint>> endpoints(workers);
+  std::vector<FlatKeyIndex> indices;
+  for (unsigned w = 0; w < workers; ++w) indices.emplace_back(1024);
+  std::vector<size_t> dropped(workers, 0);
+  parallelChunks(n, workers, [&](unsigned w, size_t begin, size_t end) {
+    auto& eps = endpoints[w];
+    auto& index = indices[w];
+    uint64_t last_key = ~0ULL;
+    uint32_t last_index = 0;
+    for (size_t i = begin; i < end; ++i) {
+      const float* p = points + 3 * i;
+      OcTreeKey key;
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
+          !tree_.coordToKeyChecked(point3d(p[0], p[1], p[2]), key)) {
+        ++dropped[w];
+        continue;
+      }
+      const uint64_t packed = packKey(key);
+      if (packed != last_key) {
+        auto [idx, inserted] = index.insert(packed, static_cast<uint32_t>(eps.size()));
+        if (inserted) {
+          eps.emplace_back();
+          eps.back().key = key;
+          eps.back().min_distance = std::numeric_limits<float>::infinity();
+        }
+        last_key = packed;
+        last_index = idx;
+      }
+      Endpoint& e = eps[last_index];
+      const float dx = p[0] - origin.x(), dy = p[1] - origin.y(), dz = p[2] - origin.z();
+      e.min_distance = std::min(e.min_distance, std::sqrt(dx * dx + dy * dy + dz * dz));
+      if (rgb) {
+        for (int c = 0; c < 3; ++c) e.rgb_sum[c] += rgb[3 * i + c];
+      }
+      ++e.count;
+    }
+  });
+  for (size_t d : dropped) result.points_dropped += d;
+  result.points_used = n - result.points_dropped;
+  std::vector<Endpoint>& merged = endpoints[0];
+  FlatKeyIndex& merged_index = indices[0];
+  for (unsigned w = 1; w < workers; ++w) {
+    for (const Endpoint& e : endpoints[w]) {
+      auto [idx, inserted] = merged_index.insert(packKey(e.key), static_cast<uint32_t>(merged.size()));
+      if (inserted) {
+        merged.push_back(e);
+        continue;
+      }
+      Endpoint& m = merged[idx];
+      for (int c = 0; c < 3; ++c) m.rgb_sum[c] += e.rgb_sum[c];
+      m.count += e.count;
+      m.min_distance = std::min(m.min_distance, e.min_distance);
+    }
+  }
+
+  // 2. Cast one ray per endpoint voxel centre (OctoMap's discretized insertion), marking free
+  //    cells in a per-worker sparse bit grid so each free voxel is collected once.
+  const unsigned ray_workers = workerCount(merged.size() * 16);
+  std::vector<SparseBitGrid> grids(ray_workers);
+  std::vector<std::vector<uint64_t>> free_codes(ray_workers);
+  parallelChunks(merged.size(), ray_workers, [&](unsigned w, size_t begin, size_t end) {
+    auto& grid = grids[w];
+    auto& out = free_codes[w];
+    auto sink = [&](uint16_t x, uint16_t y, uint16_t z) {
+      if (grid.testAndSet(x, y, z)) out.push_back(morton(OcTreeKey(x, y, z)) << 1);
+    };
+    for (size_t i = begin; i < end; ++i) {
+      Endpoint& e = merged[i];
+      const point3d centre = tree_.keyToCoord(e.key);
+      if (max_range < 0.0 || (centre - origin).norm() <= max_range) {
+        walkRay(tree_, origin, centre, sink);
+        e.hit = true;
+      } else {
+        const point3d dir = (centre - origin).normalized();
+        walkRay(tree_, origin, origin + dir * static_cast<float>(max_range), sink);
+      }
+    }
+  });
+  std::vector<uint64_t> codes = std::move(free_codes[0]);
+  for (unsigned w = 1; w < ray_workers; ++w)
+    for (uint64_t c : free_codes[w])
+      if (!grids[0].contains(unmorton(c >> 1))) codes.push_back(c);
+  for (const Endpoint& e : merged)
+    if (e.hit) codes.push_back((morton(e.key) << 1) | 1);
+
+  // 3. Key order = OctoMap's depth-first order; a hit wins over a miss of the same voxel.
+  radixSort(codes, 49);
+  size_t unique = 0;
+  for (size_t i = 0; i < codes.size(); ++i) {
+    if (unique > 0 && (codes[unique - 1] >> 1) == (codes[i] >> 1))
+      codes[unique - 1] = codes[i];  // sorted: the hit (low bit 1) comes last
+    else
+      codes[unique++] = codes[i];
+  }
+  codes.resize(unique);
+  for (uint64_t c : codes) result.voxels_occupied += c & 1;
+  result.voxels_updated = unique;
+
+  std::unique_lock lock(mutex_);
+  applyUpdates(codes, merged, merged_index, rgb != nullptr, static_cast<float>(stamp));
+  return result;
+}
+
+// Applies sorted updates with one descent per key that reuses the path shared with the previous
+// key; inner nodes are pruned or refreshed once, when the walk leaves them.
+void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vector<Endpoint>& endpoints,
+                            const FlatKeyIndex& endpoint_index, bool have_color, float stamp) {
+  if (codes.empty()) return;
+  constexpr unsigned kDepth = 16;
+  bool root_created = false;
+  if (!tree_.root) {
+    tree_.root = new VoxelNode();
+    ++tree_.tree_size;
+    root_created = true;
+  }
+  VoxelNode* path[kDepth + 1];
+  path[0] = tree_.root;
+  unsigned last = 0;  // depth of the deepest valid node on the path
+  uint64_t prev = 0;
+  bool first = true;
+  for (uint64_t entry : codes) {
+    const uint64_t code = entry >> 1;
+    const bool hit = entry & 1;
+    unsigned start = 0;
+    // Only the root can be a fresh node without children at the start of a descent; any other
+    // childless node on the path is a pruned leaf.
+    bool created = first && root_created;
+    if (!first) {
+      const unsigned diff_level = (63 - __builtin_clzll(prev ^ code)) / 3;
+      start = std::min(kDepth - 1 - diff_level, last);
+      for (unsigned d = last; d-- > start + 1;) finalizeInner(path[d]);
+    }
+    prev = code;
+    first = false;
+    VoxelNode* node = path[start];
+    unsigned depth = start;
+    bool skipped = false;
+    for (; depth < kDepth; ++depth) {
+      const unsigned pos = childAt(code, depth);
+      if (!tree_.nodeChildExists(node, pos)) {
+        if (!tree_.nodeHasChildren(node) && !created) {
+          // A pruned leaf: OctoMap skips updates that cannot change it, else expands it.
+          if (cannotChange(node->getLogOdds(), hit)) {
+            skipped = true;
+            break;
+          }
+          tree_.expandNode(node);
+          created = false;
+        } else {
+          tree_.createNodeChild(node, pos);
+          created = true;
+        }
+      } else {
+        created = false;
+      }
+      node = tree_.getNodeChild(node, pos);
+      path[depth + 1] = node;
+    }
+    last = depth;
+    if (skipped) continue;
+    const OcTreeKey key = unmorton(code);
+    const Endpoint* ep = nullptr;
+    if (hit) ep = &endpoints[*endpoint_index.find(packKey(key))];
+    updateLeaf(node, created, key, hit, ep, have_color, stamp);
+  }
+  for (unsigned d = last; d-- > 0;) finalizeInner(path[d]);
+}
+
+void VoxelMap::updateLeaf(VoxelNode* node, bool created, const OcTreeKey& key, bool hit, const Endpoint* ep,
+                          bool have_color, float stamp) {
+  const float v = node->getLogOdds();
+  if (!created && cannotChange(v, hit)) return;  // OctoMap's early abort
+  const bool was_occupied = !created && v > occupied_log_;
+  tree_.updateNodeLogOdds(node, hit ? tree_.getProbHitLog() : tree_.getProbMissLog());
+  const bool occupied = node->getLogOdds() > occupied_log_;
+  if (hit) {
+    node->last_seen = stamp;
+    node->min_distance = std::min(node->min_distance, ep->min_distance);
+    if (have_color)
+      node->color = Rgb{static_cast<uint8_t>((ep->rgb_sum[0] + ep->count / 2) / ep->count),
+                        static_cast<uint8_t>((ep->rgb_sum[1] + ep->count / 2) / ep->count),
+                        static_cast<uint8_t>((ep->rgb_sum[2] + ep->count / 2) / ep->count)};
+  }
+  if (!occupied && !was_occupied) return;
+  Column& column = columns_.at(key[0], key[1]);
+  if (occupied && !was_occupied) {
+    if (ColumnIndex::addOccupied(column, key[2])) column.setTopAttributes(*node);
+  } else if (occupied) {
+    if (hit && column.top == key[2]) column.setTopAttributes(*node);
+  } else if (ColumnIndex::removeOccupied(column, key[2]) && column.top >= 0) {
+    const VoxelNode* top = tree_.search(OcTreeKey(key[0], key[1], static_cast<uint16_t>(column.top)));
+    if (top) column.setTopAttributes(*top);
+  }
+}
+
+bool VoxelMap::cannotChange(float log_odds, bool hit) const {
+  return hit ? log_odds >= tree_.getClampingThresMaxLog() : log_odds <= tree_.getClampingThresMinLog();
+}
+
+void VoxelMap::finalizeInner(VoxelNode* node) {
+  if (!tree_.pruneNode(node)) node->updateOccupancyChildren();
+}
+
+void VoxelMap::rebuildColumnIndex() {
+  columns_.clear();
+  const unsigned max_depth = tree_.getTreeDepth();
+  for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it) {
+    if (it->getLogOdds() <= occupied_log_) continue;
+    const OcTreeKey base = it.getIndexKey();
+    const unsigned span = 1u << (max_depth - it.getDepth());
+    for (unsigned dx = 0; dx < span; ++dx)
+      for (unsigned dy = 0; dy < span; ++dy) {
+        Column& c = columns_.at(base[0] + dx, base[1] + dy);
+        for (unsigned dz = 0; dz < span; ++dz)
+          if (ColumnIndex::addOccupied(c, base[2] + dz)) c.setTopAttributes(*it);
+      }
+  }
+}
+
+ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, int height) const {
+  if (width <= 0 || height <= 0) throw std::invalid_argument("width and height must be > 0");
+  ColumnWindow w;
+  w.key_x0 = key_x0;
+  w.key_y0 = key_y0;
+  w.width = width;
+  w.height = height;
+  const size_t cells = size_t(width) * height;
+  w.observed.assign(cells, 0);
+  w.elevation.assign(cells, std::numeric_limits<float>::quiet_NaN());
+  w.color.assign(cells * 3, 0);
+  w.last_seen.assign(cells, std::numeric_limits<double>::quiet_NaN());
+  w.min_distance.assign(cells, std::numeric_limits<float>::infinity());
+  const double res = tree_.getResolution();
+  std::shared_lock lock(mutex_);
+  for (int row = 0; row < height; ++row) {
+    const int64_t ky = key_y0 + row;
+    if (ky < 0 || ky > 0xffff) continue;
+    for (int col = 0; col < width; ++col) {
+      const int64_t kx = key_x0 + col;
+      if (kx < 0 || kx > 0xffff) continue;
+      const Column* c = columns_.find(static_cast<uint16_t>(kx), static_cast<uint16_t>(ky));
+      if (!c || c->top < 0) continue;
+      const size_t i = size_t(row) * width + col;
+      w.observed[i] = 1;
+      w.elevation[i] = static_cast<float>(tree_.keyToCoord(static_cast<uint16_t>(c->top)) + 0.5 * res);
+      w.color[3 * i] = c->color.r;
+      w.color[3 * i + 1] = c->color.g;
+      w.color[3 * i + 2] = c->color.b;
+      w.last_seen[i] = c->last_seen;
+      w.min_distance[i] = c->min_distance;
+    }
+  }
+  return w;
+}
+
+std::vector<float> VoxelMap::occupancy(const double* points, size_t n) const {
+  std::vector<float> out(n, std::numeric_limits<float>::quiet_NaN());
+  std::shared_lock lock(mutex_);
+  for (size_t i = 0; i < n; ++i) {
+    const double* p = points + 3 * i;
+    OcTreeKey key;
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
+        !tree_.coordToKeyChecked(p[0], p[1], p[2], key))
+      continue;
+    if (const VoxelNode* node = tree_.search(key)) out[i] = static_cast<float>(node->getOccupancy());
+  }
+  return out;
+}
+
+bool VoxelMap::raycast(const double o[3], const double d[3], double max_range, double hit[3]) const {
+  std::shared_lock lock(mutex_);
+  point3d end;
+  if (!tree_.getRoot()) return false;
+  if (!tree_.castRay(point3d(o[0], o[1], o[2]), point3d(d[0], d[1], d[2]), end, true, max_range)) return false;
+  for (int i = 0; i < 3; ++i) hit[i] = end(i);
+  return true;
+}
+
+VoxelSet VoxelMap::voxels(const double lo[3], const double hi[3], double min_occupancy) const {
+  VoxelSet out;
+  std::shared_lock lock(mutex_);
+  OcTreeKey key_lo, key_hi;
+  if (!tree_.getRoot()) return out;
+  const point3d plo(lo[0], lo[1], lo[2]), phi(hi[0], hi[1], hi[2]);
+  if (!tree_.coordToKeyChecked(plo, key_lo) || !tree_.coordToKeyChecked(phi, key_hi))
+    throw std::invalid_argument("box is outside the map's key range");
+  const float min_log = static_cast<float>(octomap::logodds(min_occupancy));
+  for (auto it = tree_.begin_leafs_bbx(key_lo, key_hi), end = tree_.end_leafs_bbx(); it != end; ++it) {
+    if (it->getLogOdds() < min_log) continue;
+    const OcTreeKey base = it.getIndexKey();
+    const unsigned span = 1u << (tree_.getTreeDepth() - it.getDepth());
+    for (unsigned dx = 0; dx < span; ++dx)
+      for (unsigned dy = 0; dy < span; ++dy)
+        for (unsigned dz = 0; dz < span; ++dz) {
+          const OcTreeKey k(base[0] + dx, base[1] + dy, base[2] + dz);
+          bool inside = true;
+          for (int a = 0; a < 3; ++a) inside = inside && k[a] >= key_lo[a] && k[a] <= key_hi[a];
+          if (!inside) continue;
+          for (int a = 0; a < 3; ++a) out.centers.push_back(static_cast<float>(tree_.keyToCoord(k[a])));
+          out.occupancy.push_back(static_cast<float>(it->getOccupancy()));
+          out.color.insert(out.color.end(), {it->color.r, it->color.g, it->color.b});
+          out.last_seen.push_back(it->last_seen);
+          out.min_distance.push_back(it->min_distance);
+        }
+  }
+  return out;
+}
+
+void VoxelMap::save(const std::string& path) const {
+  std::shared_lock lock(mutex_);
+  if (!tree_.write(path)) throw std::runtime_error("cannot write " + path);
+}
+
+void VoxelMap::exportBt(const std::string& path) const {
+  std::shared_lock lock(mutex_);
+  if (!tree_.writeBinaryConst(path)) throw std::runtime_error("cannot write " + path);
+}
+
+namespace {
+
+template <class SrcTree, class SrcNode>
+void copyStructure(const SrcTree& src, const SrcNode* s, VoxelTree& dst, VoxelNode* d) {
+  d->setLogOdds(s->getLogOdds());
+  if constexpr (std::is_same_v<SrcNode, octomap::ColorOcTreeNode>) {
+    const auto c = s->getColor();
+    d->color = Rgb{c.r, c.g, c.b};
+  }
+  for (unsigned i = 0; i < 8; ++i)
+    if (src.nodeChildExists(s, i)) copyStructure(src, src.getNodeChild(s, i), dst, dst.createNodeChild(d, i));
+}
+
+template <class SrcTree>
+void copyTree(const SrcTree& src, VoxelTree& dst) {
+  if (!src.getRoot()) return;
+  dst.root = new VoxelNode();
+  ++dst.tree_size;
+  copyStructure(src, src.getRoot(), dst, dst.root);
+}
+
+bool endsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+}  // namespace
+
+std::unique_ptr<VoxelMap> VoxelMap::load(const std::string& path, const SensorModel& model) {
+  if (!std::ifstream(path).good()) throw std::runtime_error("cannot open " + path);
+  std::unique_ptr<VoxelMap> map;
+  if (endsWith(path, ".bt")) {
+    // Read the header for the resolution, then the occupancy bits into a tree of our type.
+    octomap::OcTree probe(0.1);
+    if (!probe.readBinary(path)) throw std::runtime_error(path + ": not a readable OctoMap .bt file");
+    map = std::make_unique<VoxelMap>(probe.getResolution(), model);
+    copyTree(probe, map->tree_);
+  } else {
+    std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(path));
+    if (!tree) throw std::runtime_error(path + ": not a readable OctoMap .ot file");
+    map = std::make_unique<VoxelMap>(tree->getResolution(), model);
+    if (auto* own = dynamic_cast<VoxelTree*>(tree.get())) {
+      map->tree_.swapContent(*own);
+    } else if (auto* color = dynamic_cast<octomap::ColorOcTree*>(tree.get())) {
+      copyTree(*color, map->tree_);
+    } else if (auto* plain = dynamic_cast<octomap::OcTree*>(tree.get())) {
+      copyTree(*plain, map->tree_);
+    } else {
+      throw std::runtime_error(path + ": unsupported tree type " + tree->getTreeType());
+    }
+  }
+  map->applyModel();
+  map->rebuildColumnIndex();
+  return map;
+}
+
+MapStats VoxelMap::stats() const {
+  std::shared_lock lock(mutex_);
+  MapStats s{};
+  s.resolution = tree_.getResolution();
+  s.nodes = tree_.size();
+  s.leaves = tree_.getNumLeafNodes();
+  s.tree_bytes = tree_.memoryUsage();
+  s.column_index_bytes = columns_.memoryBytes();
+  s.node_bytes = sizeof(VoxelNode);
+  for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it)
+    s.occupied_leaves += it->getLogOdds() > occupied_log_;
+  if (tree_.getRoot()) {
+    tree_.getMetricMin(s.min[0], s.min[1], s.min[2]);
+    tree_.getMetricMax(s.max[0], s.max[1], s.max[2]);
+  }
+  return s;
+}
+
+namespace {
+
+// Visits every finest-level voxel of every leaf of `tree`: f(key, occupied).
+template <class Tree, class F>
+void forEachVoxel(const Tree& tree, F&& f) {
+  const unsigned max_depth = tree.getTreeDepth();
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    const OcTreeKey base = it.getIndexKey();
+    const unsigned span = 1u << (max_depth - it.getDepth());
+    const bool occ = tree.isNodeOccupied(*it);
+    for (unsigned dx = 0; dx < span; ++dx)
+      for (unsigned dy = 0; dy < span; ++dy)
+        for (unsigned dz = 0; dz < span; ++dz) f(OcTreeKey(base[0] + dx, base[1] + dy, base[2] + dz), occ);
+  }
+}
+
+template <class A, class B>
+Agreement agreementImpl(const A& a, const B& b) {
+  if (std::fabs(a.getResolution() - b.getResolution()) > 1e-9)
+    throw std::invalid_argument("trees have different resolutions");
+  Agreement r;
+  forEachVoxel(a, [&](const OcTreeKey& k, bool occ) {
+    r.occupied_a += occ;
+    const auto* nb = b.search(k);
+    if (!nb) {
+      ++r.only_a;
+      return;
+    }
+    r.agree += occ == b.isNodeOccupied(nb);
+  });
+  size_t known_b = 0;
+  forEachVoxel(b, [&](const OcTreeKey& k, bool occ) {
+    ++known_b;
+    r.occupied_b += occ;
+    if (!a.search(k)) ++r.only_b;
+  });
+  r.either = known_b + r.only_a;
+  return r;
+}
+
+}  // namespace
+
+Agreement agreement(const VoxelTree& a, const octomap::OcTree& b) { return agreementImpl(a, b); }
+Agreement agreement(const VoxelTree& a, const VoxelTree& b) { return agreementImpl(a, b); }
+
+}  // namespace layerpilot

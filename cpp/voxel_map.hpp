@@ -1,0 +1,123 @@
+// VoxelMap: the attribute octree, its column index and a reader/writer lock.
+// Insertion computes rays without the lock (on several threads) and takes it only to apply
+// the de-duplicated updates in key order; readers share the lock.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <shared_mutex>
+
+#include <octomap/OcTree.h>
+#include <string>
+#include <vector>
+
+#include "column_index.hpp"
+#include "voxel_tree.hpp"
+
+namespace layerpilot {
+
+class FlatKeyIndex;
+
+struct SensorModel {
+  double prob_hit = 0.7;
+  double prob_miss = 0.4;
+  double clamp_min = 0.1192;
+  double clamp_max = 0.971;
+  double occupied_threshold = 0.5;
+};
+
+struct InsertResult {
+  size_t points_used = 0;
+  size_t points_dropped = 0;  // NaN/inf or outside the map's key range
+  size_t voxels_updated = 0;  // distinct voxels touched (free + occupied)
+  size_t voxels_occupied = 0;  // of which endpoint (hit) voxels
+};
+
+// Column window: all arrays are row-major (height, width), row = y.
+struct ColumnWindow {
+  int64_t key_x0 = 0, key_y0 = 0;
+  int width = 0, height = 0;
+  std::vector<uint8_t> observed;
+  std::vector<float> elevation;
+  std::vector<uint8_t> color;  // (h, w, 3)
+  std::vector<double> last_seen;
+  std::vector<float> min_distance;
+};
+
+struct VoxelSet {
+  std::vector<float> centers;  // (n, 3)
+  std::vector<float> occupancy;
+  std::vector<uint8_t> color;  // (n, 3)
+  std::vector<double> last_seen;
+  std::vector<float> min_distance;
+  size_t size() const { return occupancy.size(); }
+};
+
+struct MapStats {
+  double resolution;
+  size_t nodes, leaves, tree_bytes, column_index_bytes, node_bytes;
+  size_t occupied_leaves;
+  double min[3], max[3];  // metric bounds of known space (0 if empty)
+};
+
+class VoxelMap {
+ public:
+  VoxelMap(double resolution, const SensorModel& model);
+
+  // points: n x 3 float32 in the map frame; rgb: n x 3 or nullptr.
+  InsertResult insert(const float* points, size_t n, const uint8_t* rgb, const double origin[3],
+                      double stamp, double max_range);
+
+  ColumnWindow columnLayers(int64_t key_x0, int64_t key_y0, int width, int height) const;
+  std::vector<float> occupancy(const double* points, size_t n) const;  // probability, NaN = unknown
+  bool raycast(const double origin[3], const double direction[3], double max_range, double hit[3]) const;
+  VoxelSet voxels(const double box_min[3], const double box_max[3], double min_occupancy) const;
+
+  void save(const std::string& path) const;      // .ot, every attribute
+  void exportBt(const std::string& path) const;  // .bt, occupancy only
+  static std::unique_ptr<VoxelMap> load(const std::string& path, const SensorModel& model);
+
+  MapStats stats() const;
+  double resolution() const { return tree_.getResolution(); }
+  const SensorModel& model() const { return model_; }
+  // Reader access for comparisons against reference trees (caller holds no other lock).
+  template <class F>
+  auto withTree(F&& f) const {
+    std::shared_lock lock(mutex_);
+    return f(tree_);
+  }
+
+ private:
+  struct Endpoint {
+    octomap::OcTreeKey key;
+    uint32_t rgb_sum[3] = {0, 0, 0};
+    uint32_t count = 0;
+    float min_distance = 0.f;
+    bool hit = false;
+  };
+  struct RayBatch;  // per-frame scratch of insert()
+
+  void applyModel();
+  void applyUpdates(const std::vector<uint64_t>& codes, const std::vector<Endpoint>& endpoints,
+                    const FlatKeyIndex& endpoint_index, bool have_color, float stamp);
+  void updateLeaf(VoxelNode* node, bool created, const octomap::OcTreeKey& key, bool hit,
+                  const Endpoint* ep, bool have_color, float stamp);
+  bool cannotChange(float log_odds, bool hit) const;
+  void finalizeInner(VoxelNode* node);
+  void rebuildColumnIndex();
+
+  SensorModel model_;
+  VoxelTree tree_;
+  ColumnIndex columns_;
+  float occupied_log_;
+  mutable std::shared_mutex mutex_;
+};
+
+// Fraction of voxels (finest level) known to either tree on which both agree (occupied vs free).
+struct Agreement {
+  size_t agree = 0, either = 0, only_a = 0, only_b = 0, occupied_a = 0, occupied_b = 0;
+};
+Agreement agreement(const VoxelTree& a, const octomap::OcTree& b);
+Agreement agreement(const VoxelTree& a, const VoxelTree& b);
+
+}  // namespace layerpilot

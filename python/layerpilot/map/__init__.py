@@ -1,0 +1,6 @@
+"""The voxel map: OctoMap occupancy with per-voxel color, last-seen time and min distance."""
+
+from layerpilot.map.columns import ColumnLayers
+from layerpilot.map.voxel_map import InsertResult, SensorModel, VoxelMap, Voxels, agreement
+
+__all__ = ["ColumnLayers", "InsertResult", "SensorModel", "VoxelMap", "Voxels", "agreement"]
