@@ -421,10 +421,11 @@ VoxelSet VoxelMap::voxels(const double lo[3], const double hi[3], double min_occ
       for (unsigned dy = 0; dy < span; ++dy)
         for (unsigned dz = 0; dz < span; ++dz) {
           const OcTreeKey k(base[0] + dx, base[1] + dy, base[2] + dz);
-          bool inside = true;
-          for (int a = 0; a < 3; ++a) inside = inside && k[a] >= key_lo[a] && k[a] <= key_hi[a];
+          const double c[3] = {tree_.keyToCoord(k[0]), tree_.keyToCoord(k[1]), tree_.keyToCoord(k[2])};
+          bool inside = true;  // voxels whose centre lies in the box
+          for (int a = 0; a < 3; ++a) inside = inside && c[a] >= lo[a] && c[a] <= hi[a];
           if (!inside) continue;
-          for (int a = 0; a < 3; ++a) out.centers.push_back(static_cast<float>(tree_.keyToCoord(k[a])));
+          for (int a = 0; a < 3; ++a) out.centers.push_back(static_cast<float>(c[a]));
           out.occupancy.push_back(static_cast<float>(it->getOccupancy()));
           out.color.insert(out.color.end(), {it->color.r, it->color.g, it->color.b});
           out.last_seen.push_back(it->last_seen);

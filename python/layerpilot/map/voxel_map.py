@@ -147,7 +147,7 @@ class VoxelMap:
         return None if hit is None else np.array(hit)
 
     def voxels(self, box_min: np.ndarray, box_max: np.ndarray, min_occupancy: float | None = None) -> Voxels:
-        """All voxels in the box with occupancy >= min_occupancy (default: above the threshold)."""
+        """Voxels whose centre lies in the box, with occupancy >= min_occupancy (default: above the threshold)."""
         lo = _array(box_min, "box_min", np.float64, (3,))
         hi = _array(box_max, "box_max", np.float64, (3,))
         if np.any(lo > hi):
