@@ -441,8 +441,14 @@ void VoxelMap::save(const std::string& path) const {
 }
 
 void VoxelMap::exportBt(const std::string& path) const {
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw std::runtime_error("cannot write " + path);
   std::shared_lock lock(mutex_);
-  if (!tree_.writeBinaryConst(path)) throw std::runtime_error("cannot write " + path);
+  // OctoMap's binary header with the stock tree id, so every .bt reader takes the file as is.
+  out << "# Octomap OcTree binary file\n#\n"
+      << "id OcTree\nsize " << tree_.size() << "\nres " << tree_.getResolution() << "\ndata\n";
+  tree_.writeBinaryData(out);
+  if (!out) throw std::runtime_error("cannot write " + path);
 }
 
 namespace {
