@@ -212,7 +212,9 @@ InsertResult VoxelMap::insert(const float* points, size_t n, const uint8_t* rgb,
     if (e.hit) codes.push_back((morton(e.key) << 1) | 1);
 
   // 3. Key order = OctoMap's depth-first order; a hit wins over a miss of the same voxel.
-  radixSort(codes, 49);
+  uint64_t varying = 0;  // only the bits that differ between codes need sorting
+  for (uint64_t c : codes) varying |= c ^ codes.front();
+  radixSort(codes, varying ? 64 - __builtin_clzll(varying) : 0);
   size_t unique = 0;
   for (size_t i = 0; i < codes.size(); ++i) {
     if (unique > 0 && (codes[unique - 1] >> 1) == (codes[i] >> 1))

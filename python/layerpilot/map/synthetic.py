@@ -1,7 +1,7 @@
 """Deterministic depth-camera frames over rough terrain with trees, for benchmarks and tests.
 
 A heightfield (rolling hills plus tree crowns as bumps) is ray-marched from a 640x480 camera
-flying 40-60 m above it, pitched down, so frames look like a survey drone's: most rays hit
+flying 40-60 m above it, pitched down (60 degrees, the simulator's default), so frames look like a survey drone's: most rays hit
 ground 50-100 m away, some leave the 100 m range.
 """
 
@@ -68,8 +68,8 @@ def camera_rays(width: int, height: int, hfov_deg: float, yaw: float, pitch_deg:
 
 
 def survey_frames(count: int, seed: int = 0, width: int = 640, height: int = 480,
-                  max_distance: float = 130.0) -> list[Frame]:
-    """``count`` frames along a straight survey leg at 40-60 m, camera pitched 45 degrees down."""
+                  pitch_deg: float = 60.0, max_distance: float = 130.0) -> list[Frame]:
+    """``count`` frames along a straight survey leg at 40-60 m, camera pitched down (degrees)."""
     field = Heightfield(seed)
     rng = np.random.default_rng(seed + 1)
     frames = []
@@ -77,10 +77,10 @@ def survey_frames(count: int, seed: int = 0, width: int = 640, height: int = 480
         x, y = -100.0 + 15.0 * k, rng.uniform(-20, 20)
         z = float(field.height(np.array([x]), np.array([y]))[0]) + rng.uniform(40, 60)
         origin = np.array([x, y, z])
-        dirs = camera_rays(width, height, 90.0, yaw=rng.uniform(-0.3, 0.3), pitch_deg=45.0)
+        dirs = camera_rays(width, height, 90.0, yaw=rng.uniform(-0.3, 0.3), pitch_deg=pitch_deg)
         t = np.full(len(dirs), np.nan)
         prev = np.zeros(len(dirs))
-        for step in np.arange(0.5, max_distance, 0.5):
+        for step in np.arange(1.0, max_distance, 1.0):
             todo = np.isnan(t)
             p = origin + dirs[todo] * step
             below = p[:, 2] < field.height(p[:, 0], p[:, 1])
@@ -89,7 +89,7 @@ def survey_frames(count: int, seed: int = 0, width: int = 640, height: int = 480
             prev[np.flatnonzero(todo)[~below]] = step
         hit = ~np.isnan(t)
         lo, hi = prev[hit], t[hit]
-        for _ in range(8):  # bisection to millimetres
+        for _ in range(10):  # bisection to millimetres
             mid = 0.5 * (lo + hi)
             p = origin + dirs[hit] * mid[:, None]
             below = p[:, 2] < field.height(p[:, 0], p[:, 1])

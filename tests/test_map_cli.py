@@ -1,0 +1,45 @@
+"""The map's commands: building a map from the real scan, and the side-by-side benchmark."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from layerpilot.cli import main
+from layerpilot.map import VoxelMap
+from layerpilot.map.bench import print_map_bench, run_map_bench
+from layerpilot.map.synthetic import survey_frames
+
+
+def test_map_scan_writes_maps_and_pictures(octomap_data: Path, tmp_path: Path, capsys) -> None:
+    assert main(["map", "scan", str(octomap_data / "scan.dat.bz2"), "--out", str(tmp_path), "--resolution", "0.5"]) == 0
+    out = capsys.readouterr().out
+    for name in ("map.ot", "map.bt", "elevation.png", "color.png"):
+        assert (tmp_path / name).stat().st_size > 1000, name
+        assert f"wrote {tmp_path / name}" in out
+    m = VoxelMap.load(tmp_path / "map.ot")
+    assert m.resolution == 0.5 and m.stats()["occupied_leaves"] > 1000
+    assert main(["map", "info", str(tmp_path / "map.bt")]) == 0
+    assert "occupied_leaves" in capsys.readouterr().out
+
+
+def test_map_scan_rejects_a_file_that_is_not_a_scan(tmp_path: Path, capsys) -> None:
+    (tmp_path / "bad.txt").write_text("1 2\n3 4\n")
+    assert main(["map", "scan", str(tmp_path / "bad.txt"), "--out", str(tmp_path / "o")]) == 2
+    assert "expected 3 columns" in capsys.readouterr().err
+
+
+def test_bench_map_reports_every_figure(capsys) -> None:
+    frames = survey_frames(2, seed=1, width=96, height=72)
+    result = run_map_bench(frames)
+    print_map_bench(result)
+    last = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert last == result
+    assert result["voxel_agreement"] >= 0.99
+    assert result["points_per_frame"] == 96 * 72
+    for key in ("layerpilot_ms", "octomap_discretized_ms", "octomap_default_ms", "column_layers_512_ms"):
+        assert result[key] > 0, key
+    assert result["node_bytes"] == 24 and result["leaves"] > 1000
+    assert np.isfinite(result["ratio_vs_default"]) and np.isfinite(result["ratio_vs_discretized"])
