@@ -149,6 +149,7 @@ PYBIND11_MODULE(_core, m) {
       .def(py::init<double>())
       .def("insert", &ReferenceOcTree::insert, "insertPointCloud; returns milliseconds")
       .def("leaves", [](const ReferenceOcTree& r) { return r.tree.getNumLeafNodes(); })
+      .def("memory_usage", [](const ReferenceOcTree& r) { return r.tree.memoryUsage(); })
       .def("write_bt", [](ReferenceOcTree& r, const std::string& path) { return r.tree.writeBinary(path); });
 
   m.def("_agreement", [](const VoxelMap& a, const ReferenceOcTree& b) {

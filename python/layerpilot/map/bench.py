@@ -55,6 +55,7 @@ def run_map_bench(frames: list[Frame], resolution: float = 1.0, max_range: float
         "column_layers_512_ms": round(window, 2),
         "node_bytes": stats["node_bytes"],
         "bytes_per_leaf": round(stats["bytes_per_leaf"], 1),
+        "octomap_bytes_per_leaf": round(discretized.memory_usage() / discretized.leaves(), 1),
         "leaves": stats["leaves"],
     }
 
@@ -69,6 +70,7 @@ def print_map_bench(result: dict) -> None:
         ("voxel agreement with discretized", f"{100 * result['voxel_agreement']:.3f} % of {result['voxels_compared']}"),
         ("column layers 512x512", f"{result['column_layers_512_ms']:.2f} ms"),
         ("node size / tree bytes per leaf", f"{result['node_bytes']} B / {result['bytes_per_leaf']} B"),
+        ("OctoMap OcTree bytes per leaf (same data)", f"{result['octomap_bytes_per_leaf']} B"),
     ]
     width = max(len(name) for name, _ in rows)
     print(f"{result['frames']} frames of {result['points_per_frame']} points, 1 m voxels, 100 m range")
