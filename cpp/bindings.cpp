@@ -1,5 +1,6 @@
 // Thin pybind11 layer (`layerpilot._core`): argument checks live in Python (layerpilot.map),
 // arrays leave C++ without copies, and the GIL is released while the map works.
+#include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -22,9 +23,6 @@ py::array_t<T> toArray(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
   return py::array_t<T>(shape, owned->data(), free_when_done);
 }
 
-using FloatArray = py::array_t<float, py::array::c_style>;
-using DoubleArray = py::array_t<double, py::array::c_style>;
-using ByteArray = py::array_t<uint8_t, py::array::c_style>;
 
 py::dict agreementDict(const Agreement& a) {
   py::dict d;
@@ -42,12 +40,12 @@ struct ReferenceOcTree {
   octomap::OcTree tree;
   explicit ReferenceOcTree(double resolution) : tree(resolution) {}
 
-  double insert(const FloatArray& points, const DoubleArray& origin, double max_range, bool discretize) {
+  double insert(const Eigen::Ref<const Points>& points, const Eigen::Vector3d& origin, double max_range,
+                bool discretize) {
     octomap::Pointcloud cloud;
-    cloud.reserve(points.shape(0));
-    const float* p = points.data();
-    for (py::ssize_t i = 0; i < points.shape(0); ++i) cloud.push_back(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
-    const octomap::point3d o(origin.at(0), origin.at(1), origin.at(2));
+    cloud.reserve(points.rows());
+    for (Eigen::Index i = 0; i < points.rows(); ++i) cloud.push_back(points(i, 0), points(i, 1), points(i, 2));
+    const octomap::point3d o(origin.x(), origin.y(), origin.z());
     py::gil_scoped_release release;
     auto t0 = std::chrono::steady_clock::now();
     tree.insertPointCloud(cloud, o, max_range, false, discretize);
@@ -73,13 +71,12 @@ PYBIND11_MODULE(_core, m) {
       .def_static("load", &VoxelMap::load, py::call_guard<py::gil_scoped_release>())
       .def_property_readonly("resolution", &VoxelMap::resolution)
       .def("insert",
-           [](VoxelMap& map, const FloatArray& points, const DoubleArray& origin, std::optional<ByteArray> colors,
-              double stamp, double max_range) {
-             const uint8_t* rgb = colors ? colors->data() : nullptr;
+           [](VoxelMap& map, const Eigen::Ref<const Points>& points, const Eigen::Ref<const Colors>& colors,
+              const Eigen::Vector3d& origin, double stamp, double max_range) {
              InsertResult r;
              {
                py::gil_scoped_release release;
-               r = map.insert(points.data(), points.shape(0), rgb, origin.data(), stamp, max_range);
+               r = map.insert(points, colors, origin, stamp, max_range);
              }
              return py::make_tuple(r.points_used, r.points_dropped, r.voxels_updated, r.voxels_occupied);
            })
@@ -95,29 +92,14 @@ PYBIND11_MODULE(_core, m) {
                                    toArray(std::move(w.color), {h, wd, 3}), toArray(std::move(w.last_seen), {h, wd}),
                                    toArray(std::move(w.min_distance), {h, wd}));
            })
-      .def("occupancy",
-           [](const VoxelMap& map, const DoubleArray& points) {
-             std::vector<float> out;
-             {
-               py::gil_scoped_release release;
-               out = map.occupancy(points.data(), points.shape(0));
-             }
-             return toArray(std::move(out), {static_cast<py::ssize_t>(points.shape(0))});
-           })
-      .def("raycast",
-           [](const VoxelMap& map, const DoubleArray& origin, const DoubleArray& direction,
-              double max_range) -> std::optional<std::tuple<double, double, double>> {
-             double hit[3];
-             py::gil_scoped_release release;
-             if (!map.raycast(origin.data(), direction.data(), max_range, hit)) return std::nullopt;
-             return std::make_tuple(hit[0], hit[1], hit[2]);
-           })
+      .def("occupancy", &VoxelMap::occupancy, py::call_guard<py::gil_scoped_release>())
+      .def("raycast", &VoxelMap::raycast, py::call_guard<py::gil_scoped_release>())
       .def("voxels",
-           [](const VoxelMap& map, const DoubleArray& lo, const DoubleArray& hi, double min_occupancy) {
+           [](const VoxelMap& map, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double min_occupancy) {
              VoxelSet s;
              {
                py::gil_scoped_release release;
-               s = map.voxels(lo.data(), hi.data(), min_occupancy);
+               s = map.voxels(lo, hi, min_occupancy);
              }
              const py::ssize_t n = s.size();
              return py::make_tuple(toArray(std::move(s.centers), {n, 3}), toArray(std::move(s.occupancy), {n}),

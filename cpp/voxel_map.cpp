@@ -116,11 +116,16 @@ void VoxelMap::applyModel() {
   occupied_log_ = tree_.getOccupancyThresLog();
 }
 
-InsertResult VoxelMap::insert(const float* points, size_t n, const uint8_t* rgb, const double origin_d[3],
-                              double stamp, double max_range) {
+InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen::Ref<const Colors>& colors,
+                              const Eigen::Vector3d& origin_d, double stamp, double max_range) {
+  if (colors.rows() != 0 && colors.rows() != cloud.rows())
+    throw std::invalid_argument("colors must have one row per point");
   InsertResult result;
-  const point3d origin(static_cast<float>(origin_d[0]), static_cast<float>(origin_d[1]),
-                       static_cast<float>(origin_d[2]));
+  const size_t n = cloud.rows();
+  const float* points = cloud.data();
+  const uint8_t* rgb = colors.rows() ? colors.data() : nullptr;
+  const point3d origin(static_cast<float>(origin_d.x()), static_cast<float>(origin_d.y()),
+                       static_cast<float>(origin_d.z()));
   OcTreeKey origin_key;
   if (!tree_.coordToKeyChecked(origin, origin_key)) throw std::invalid_argument("origin is outside the map");
 
@@ -383,35 +388,33 @@ ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, i
   return w;
 }
 
-std::vector<float> VoxelMap::occupancy(const double* points, size_t n) const {
-  std::vector<float> out(n, std::numeric_limits<float>::quiet_NaN());
+Eigen::VectorXf VoxelMap::occupancy(const Eigen::Ref<const Queries>& points) const {
+  Eigen::VectorXf out = Eigen::VectorXf::Constant(points.rows(), std::numeric_limits<float>::quiet_NaN());
   std::shared_lock lock(mutex_);
-  for (size_t i = 0; i < n; ++i) {
-    const double* p = points + 3 * i;
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
     OcTreeKey key;
-    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
-        !tree_.coordToKeyChecked(p[0], p[1], p[2], key))
+    if (!points.row(i).allFinite() || !tree_.coordToKeyChecked(points(i, 0), points(i, 1), points(i, 2), key))
       continue;
     if (const VoxelNode* node = tree_.search(key)) out[i] = static_cast<float>(node->getOccupancy());
   }
   return out;
 }
 
-bool VoxelMap::raycast(const double o[3], const double d[3], double max_range, double hit[3]) const {
+std::optional<Eigen::Vector3d> VoxelMap::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                                                 double max_range) const {
   std::shared_lock lock(mutex_);
   point3d end;
-  if (!tree_.getRoot()) return false;
-  if (!tree_.castRay(point3d(o[0], o[1], o[2]), point3d(d[0], d[1], d[2]), end, true, max_range)) return false;
-  for (int i = 0; i < 3; ++i) hit[i] = end(i);
-  return true;
+  if (!tree_.getRoot() || !tree_.castRay(point3d(o.x(), o.y(), o.z()), point3d(d.x(), d.y(), d.z()), end, true, max_range))
+    return std::nullopt;
+  return Eigen::Vector3d(end.x(), end.y(), end.z());
 }
 
-VoxelSet VoxelMap::voxels(const double lo[3], const double hi[3], double min_occupancy) const {
+VoxelSet VoxelMap::voxels(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double min_occupancy) const {
   VoxelSet out;
   std::shared_lock lock(mutex_);
   OcTreeKey key_lo, key_hi;
   if (!tree_.getRoot()) return out;
-  const point3d plo(lo[0], lo[1], lo[2]), phi(hi[0], hi[1], hi[2]);
+  const point3d plo(lo.x(), lo.y(), lo.z()), phi(hi.x(), hi.y(), hi.z());
   if (!tree_.coordToKeyChecked(plo, key_lo) || !tree_.coordToKeyChecked(phi, key_hi))
     throw std::invalid_argument("box is outside the map's key range");
   const float min_log = static_cast<float>(octomap::logodds(min_occupancy));

@@ -7,16 +7,23 @@
 #include <mutex>
 #include <shared_mutex>
 
+#include <Eigen/Core>
 #include <octomap/OcTree.h>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "column_index.hpp"
+#include "rw_lock.hpp"
 #include "voxel_tree.hpp"
 
 namespace layerpilot {
 
 class FlatKeyIndex;
+
+using Points = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using Colors = Eigen::Matrix<uint8_t, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using Queries = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 
 struct SensorModel {
   double prob_hit = 0.7;
@@ -64,14 +71,15 @@ class VoxelMap {
  public:
   VoxelMap(double resolution, const SensorModel& model);
 
-  // points: n x 3 float32 in the map frame; rgb: n x 3 or nullptr.
-  InsertResult insert(const float* points, size_t n, const uint8_t* rgb, const double origin[3],
-                      double stamp, double max_range);
+  // points in the map frame; colors: one row per point, or no rows for a frame without color.
+  InsertResult insert(const Eigen::Ref<const Points>& points, const Eigen::Ref<const Colors>& colors,
+                      const Eigen::Vector3d& origin, double stamp, double max_range);
 
   ColumnWindow columnLayers(int64_t key_x0, int64_t key_y0, int width, int height) const;
-  std::vector<float> occupancy(const double* points, size_t n) const;  // probability, NaN = unknown
-  bool raycast(const double origin[3], const double direction[3], double max_range, double hit[3]) const;
-  VoxelSet voxels(const double box_min[3], const double box_max[3], double min_occupancy) const;
+  Eigen::VectorXf occupancy(const Eigen::Ref<const Queries>& points) const;  // probability, NaN = unknown
+  std::optional<Eigen::Vector3d> raycast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                                         double max_range) const;
+  VoxelSet voxels(const Eigen::Vector3d& box_min, const Eigen::Vector3d& box_max, double min_occupancy) const;
 
   void save(const std::string& path) const;      // .ot, every attribute
   void exportBt(const std::string& path) const;  // .bt, occupancy only
@@ -110,7 +118,7 @@ class VoxelMap {
   VoxelTree tree_;
   ColumnIndex columns_;
   float occupied_log_;
-  mutable std::shared_mutex mutex_;
+  mutable WriterPreferringLock mutex_;
 };
 
 // Fraction of voxels (finest level) known to either tree on which both agree (occupied vs free).

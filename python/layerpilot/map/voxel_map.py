@@ -13,6 +13,7 @@ from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
 
 KEY_OFFSET = 32768  # OctoMap's key of the cell whose lower corner is the map origin
+_NO_COLORS = np.zeros((0, 3), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -106,14 +107,12 @@ class VoxelMap:
         org = _array(origin, "origin", np.float64, (3,))
         if not np.all(np.isfinite(org)):
             raise ValueError(f"origin: must be finite, got {org}")
-        cols = None
-        if colors is not None:
-            cols = _array(colors, "colors", np.uint8, (len(pts), 3))
+        cols = _NO_COLORS if colors is None else _array(colors, "colors", np.uint8, (len(pts), 3))
         if not np.isfinite(stamp):
             raise ValueError(f"stamp: must be finite, got {stamp}")
         if not max_range > 0:
             raise ValueError(f"max_range: must be > 0, got {max_range}")
-        return InsertResult(*self._core.insert(pts, org, cols, float(stamp), float(max_range)))
+        return InsertResult(*self._core.insert(pts, cols, org, float(stamp), float(max_range)))
 
     def column_layers(self, x: float, y: float, width: int, height: int) -> ColumnLayers:
         """Per-column summary of a window whose south-west corner is (x, y), snapped to the grid."""
@@ -143,8 +142,7 @@ class VoxelMap:
         d = _array(direction, "direction", np.float64, (3,))
         if not np.linalg.norm(d) > 0:
             raise ValueError("direction: must be non-zero")
-        hit = self._core.raycast(org, d, float(max_range))
-        return None if hit is None else np.array(hit)
+        return self._core.raycast(org, d, float(max_range))
 
     def voxels(self, box_min: np.ndarray, box_max: np.ndarray, min_occupancy: float | None = None) -> Voxels:
         """Voxels whose centre lies in the box, with occupancy >= min_occupancy (default: above the threshold)."""
