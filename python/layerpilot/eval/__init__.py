@@ -1,0 +1,1 @@
+"""Evaluation: the method paper's metrics, their time series, plots and reports."""
