@@ -1,0 +1,108 @@
+"""Figures for reports: metrics over time, flight path over the color layer, layer images.
+
+matplotlib's Agg backend only (no display); every function writes one PNG and returns its path.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from layerpilot.eval.series import MetricSeries  # noqa: E402
+from layerpilot.map.columns import ColumnLayers  # noqa: E402
+
+LABELS = {
+    "percent_mapped": "area mapped (%)",
+    "avg_time_since_observed": "average time since observed (s)",
+    "avg_min_distance": "average minimum observed distance (m)",
+    "paper_recall": "3D recall (paper)",
+    "paper_mse": "3D MSE (paper, m)",
+    "precision": "3D precision",
+    "recall": "3D recall (completeness)",
+    "f_score": "3D F-score",
+}
+
+
+def _save(fig: plt.Figure, path: str | os.PathLike) -> Path:
+    path = Path(path)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_metric(runs: Mapping[str, Sequence[MetricSeries]], metric: str, path: str | os.PathLike) -> Path:
+    """One metric over time; one line per label (mean over its runs, min-max band if several)."""
+    if not runs:
+        raise ValueError("runs: nothing to plot")
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for label, series in runs.items():
+        if not series:
+            raise ValueError(f"runs: {label!r} has no series")
+        n = min(len(s) for s in series)
+        t = series[0].column("t")[:n]
+        values = np.array([s.column(metric)[:n] for s in series])
+        with np.errstate(all="ignore"):
+            mean = np.nanmean(values, axis=0) if len(series) > 1 else values[0]
+        (line,) = ax.plot(t, mean, label=label)
+        if len(series) > 1:
+            ax.fill_between(t, np.nanmin(values, axis=0), np.nanmax(values, axis=0), color=line.get_color(), alpha=0.2)
+    ax.set_xlabel("simulated time (s)")
+    ax.set_ylabel(LABELS.get(metric, metric))
+    ax.grid(alpha=0.3)
+    if len(runs) > 1:
+        ax.legend(fontsize="small")
+    return _save(fig, path)
+
+
+def plot_flight_path(
+    layers: ColumnLayers,
+    path_xy: np.ndarray,
+    aoi: np.ndarray,
+    out: str | os.PathLike,
+    title: str = "",
+) -> Path:
+    """The flight path (x, y per row) drawn over the color layer, with the area of interest outlined."""
+    path_xy = np.asarray(path_xy, dtype=np.float64)
+    if path_xy.ndim != 2 or path_xy.shape[1] != 2:
+        raise ValueError(f"path_xy: expected shape (N, 2), got {path_xy.shape}")
+    if aoi.shape != layers.geometry.shape:
+        raise ValueError(f"aoi: expected shape {layers.geometry.shape}, got {aoi.shape}")
+    g = layers.geometry
+    image = layers.color.copy()
+    image[~layers.observed] = 40  # unobserved columns dark grey
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.imshow(image, origin="lower", extent=g.extent, interpolation="nearest")
+    xs, ys = g.cell_centers()
+    ax.contour(xs, ys, aoi.astype(float), levels=[0.5], colors="yellow", linewidths=1.2)
+    if len(path_xy):
+        ax.plot(path_xy[:, 0], path_xy[:, 1], color="red", linewidth=1.0)
+        ax.plot(*path_xy[0], "o", color="white", markeredgecolor="black", label="start")
+        ax.plot(*path_xy[-1], "s", color="red", markeredgecolor="black", label="end")
+        ax.legend(fontsize="small", loc="upper right")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    if title:
+        ax.set_title(title)
+    return _save(fig, out)
+
+
+def plot_layer(
+    values: np.ndarray, layers: ColumnLayers, out: str | os.PathLike, title: str, cmap: str = "viridis"
+) -> Path:
+    """A scalar layer on the layers' grid with a colorbar; NaN cells stay blank."""
+    if values.shape != layers.geometry.shape:
+        raise ValueError(f"values: expected shape {layers.geometry.shape}, got {values.shape}")
+    fig, ax = plt.subplots(figsize=(6, 5))
+    im = ax.imshow(values, origin="lower", extent=layers.geometry.extent, cmap=cmap, interpolation="nearest")
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    ax.set_title(title)
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    return _save(fig, out)
