@@ -113,16 +113,18 @@ class SparseBitGrid {
   // Sets the bit; returns true if it was not set before.
   bool testAndSet(uint16_t x, uint16_t y, uint16_t z) {
     const uint64_t block_id = uint64_t(x >> 4) | (uint64_t(y >> 4) << 12) | (uint64_t(z >> 4) << 24);
-    if (block_id != last_id_) {
+    // Rays from one origin keep revisiting the same blocks: a small direct-mapped cache in
+    // front of the hash index answers most block look-ups.
+    CacheEntry& slot = cache_[(block_id ^ (block_id >> 9) ^ (block_id >> 19)) & (kCacheSize - 1)];
+    if (slot.id != block_id) {
       auto [index, inserted] = index_.insert(block_id, static_cast<uint32_t>(blocks_.size()));
       if (inserted) blocks_.emplace_back();
-      last_id_ = block_id;
-      last_ = &blocks_[index];
+      slot = {block_id, &blocks_[index]};
     }
     const uint32_t bit = (x & 15) | ((y & 15) << 4) | ((z & 15) << 8);
-    uint64_t mask = 1ULL << (bit & 63);
-    uint64_t& word = last_->words[bit >> 6];
-    bool was_set = word & mask;
+    const uint64_t mask = 1ULL << (bit & 63);
+    uint64_t& word = slot.block->words[bit >> 6];
+    const bool was_set = word & mask;
     word |= mask;
     return !was_set;
   }
@@ -142,10 +144,15 @@ class SparseBitGrid {
     return uint64_t(k[0] >> 4) | (uint64_t(k[1] >> 4) << 12) | (uint64_t(k[2] >> 4) << 24);
   }
 
+  struct CacheEntry {
+    uint64_t id = ~0ULL;
+    Block* block = nullptr;
+  };
+  static constexpr size_t kCacheSize = 256;
+
   FlatKeyIndex index_{256};
   std::deque<Block> blocks_;  // stable addresses while growing
-  uint64_t last_id_ = ~0ULL;
-  Block* last_ = nullptr;
+  CacheEntry cache_[kCacheSize];
 };
 
 // LSD radix sort of 64-bit values whose significant bits are below `bits` (16-bit digits).
