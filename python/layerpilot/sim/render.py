@@ -85,11 +85,11 @@ float vnoise(vec3 p) {  // trilinear value noise in [0, 1]
 float fbm(vec3 p, float base_freq, float fw) {
     float s = 0.0, amp = 0.5, freq = base_freq;
     for (int k = 0; k < 7; k++) {
-        float fade = clamp((0.45 - fw * freq) * 5.0, 0.0, 1.0);
+        float fade = clamp((0.6 - fw * freq) * 4.0, 0.0, 1.0);
         if (fade <= 0.0) break;
         s += amp * fade * (vnoise(p * freq + float(k) * 17.3) - 0.5);
         freq *= 2.0;
-        amp *= 0.6;
+        amp *= 0.8;
     }
     return s;
 }
@@ -119,7 +119,7 @@ void main() {
         detail = fbm(v_pos, 1.0, fw);
     }
     float hue = vnoise(v_pos * 0.9 + 31.0) - 0.5;
-    vec3 albedo = base * (1.0 + 1.6 * detail) + vec3(0.06, 0.03, -0.02) * hue;
+    vec3 albedo = base * (1.0 + 2.0 * detail) + vec3(0.06, 0.03, -0.02) * hue;
     const vec3 sun = normalize(vec3(0.4, 0.3, 0.85));
     float light = 0.45 + 0.75 * max(dot(n, sun), 0.0);
     f_color = vec4(clamp(albedo * light, 0.0, 1.0), 1.0);
