@@ -1,0 +1,73 @@
+"""Depth sources: whatever turns frames into map-frame point clouds.
+
+A node holds one ``DepthSource`` and calls ``push(frame)`` for every camera
+frame; it gets a ``PointCloud`` or ``None`` (frame skipped, reason counted in
+``stats()``). ``StereoDepth`` estimates depth from two views; ``GroundTruthDepth``
+back-projects a depth image that comes with the frame (simulator or RGB-D), the
+ideal reference for the map.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Protocol
+
+import numpy as np
+
+from layerpilot.depth.config import DepthConfig
+from layerpilot.depth.frames import Frame, PointCloud, camera_points_to_cloud
+from layerpilot.depth.picking import FramePicker
+from layerpilot.depth.stereo import StereoMatcher
+
+
+class DepthSource(Protocol):
+    def push(self, frame: Frame) -> PointCloud | None: ...
+
+    def stats(self) -> dict[str, int]: ...
+
+
+class StereoDepth:
+    """Two-view stereo: pick a partner for each new frame, match, filter, publish."""
+
+    def __init__(self, config: DepthConfig = DepthConfig(),
+                 scene_depth: Callable[[Frame], float] | None = None) -> None:
+        self.picker = FramePicker(config.pick, scene_depth)
+        self.matcher = StereoMatcher(config.match)
+
+    def push(self, frame: Frame) -> PointCloud | None:
+        pick = self.picker.push(frame)
+        if pick.partner is None:
+            return None
+        cloud, _ = self.matcher.cloud(frame, pick.partner)
+        return cloud
+
+    def stats(self) -> dict[str, int]:
+        return {"pairs": self.picker.pairs, **{f"skipped_{k}": v for k, v in sorted(self.picker.skipped.items())}}
+
+
+class GroundTruthDepth:
+    """Back-project ``frame.depth`` (z-depth, metres); pixels beyond ``max_depth`` are dropped."""
+
+    def __init__(self, max_depth: float = 100.0, stride: int = 1) -> None:
+        if stride < 1:
+            raise ValueError(f"stride: must be >= 1, got {stride}")
+        self.max_depth = max_depth
+        self.stride = stride
+        self.frames = 0
+        self.skipped_no_depth = 0
+
+    def push(self, frame: Frame) -> PointCloud | None:
+        if frame.depth is None:
+            self.skipped_no_depth += 1
+            return None
+        s = self.stride
+        depth = frame.depth[::s, ::s]
+        v, u = np.nonzero(np.isfinite(depth) & (depth > 0) & (depth <= self.max_depth))
+        z = depth[v, u].astype(np.float64)
+        u, v = u * s, v * s
+        K = frame.K
+        cam = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+        self.frames += 1
+        return camera_points_to_cloud(frame, cam, frame.image[v, u], np.stack([u, v], axis=1))
+
+    def stats(self) -> dict[str, int]:
+        return {"frames": self.frames, "skipped_no_depth": self.skipped_no_depth}

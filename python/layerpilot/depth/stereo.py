@@ -1,0 +1,103 @@
+"""Semi-global matching and the filters that keep only trustworthy depths.
+
+OpenCV's StereoSGBM matches the canonical pair (see ``rectify``); its own
+uniqueness and speckle filters run inside. Around it: an explicit left-right
+consistency check (the right-view disparity comes from matching the mirrored
+pair), an edge margin around the valid rectified area of both images, and a
+depth window ``[min_depth, max_depth]`` (100 m by default). Survivors are
+triangulated, ``Z = f * B / d``, and moved into the map frame.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from layerpilot.depth.config import MatchConfig
+from layerpilot.depth.frames import Frame, PointCloud, camera_points_to_cloud
+from layerpilot.depth.rectify import RectifiedPair, rectify
+
+_MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "sgbm_3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+          "hh": cv2.STEREO_SGBM_MODE_HH, "hh4": cv2.STEREO_SGBM_MODE_HH4}
+
+
+@dataclass(frozen=True)
+class Disparity:
+    """Filtered disparity of a canonical pair; NaN where a filter rejected the pixel."""
+
+    pair: RectifiedPair
+    disparity: np.ndarray  # float32 (H, W), pixels at matching scale
+    depth: np.ndarray  # float32 (H, W), metres along the canonical optical axis, NaN = none
+    rejected: Counter  # pixels removed per filter, in the order applied
+
+
+class StereoMatcher:
+    """Rectify, match and filter one frame pair; ``cloud`` gives map-frame points."""
+
+    def __init__(self, config: MatchConfig = MatchConfig()) -> None:
+        self.config = config
+        c = config
+        self._sgbm = cv2.StereoSGBM_create(
+            minDisparity=0, numDisparities=c.num_disparities, blockSize=c.block_size,
+            P1=8 * c.block_size ** 2, P2=32 * c.block_size ** 2, disp12MaxDiff=-1, preFilterCap=31,
+            uniquenessRatio=c.uniqueness_ratio, speckleWindowSize=c.speckle_window,
+            speckleRange=c.speckle_range, mode=_MODES[c.mode])
+
+    def disparity(self, ref: Frame, other: Frame) -> Disparity:
+        c = self.config
+        pair = rectify(ref, other, c.scale)
+        raw = self._match(pair.left, pair.right)
+        right = self._match(pair.right[:, ::-1], pair.left[:, ::-1])[:, ::-1]
+        rejected: Counter = Counter()
+        h, w = raw.shape
+        keep = raw > 0
+        rejected["no_match"] = int((~keep).sum())  # includes SGBM's uniqueness and speckle rejections
+        cols = np.arange(w, dtype=np.float32)[None, :]
+        ur = np.rint(cols - raw).astype(np.int32)
+        inside = keep & (ur >= 0)
+        urc = np.clip(ur, 0, w - 1)
+        rows = np.arange(h)[:, None]
+        lr_ok = inside & (np.abs(right[rows, urc] - raw) <= c.lr_max_diff)
+        rejected["left_right"] = int((keep & ~lr_ok).sum())
+        keep = lr_ok
+        margin_ok = keep & _eroded(pair.left_valid, c.edge_margin) & _eroded(pair.right_valid, c.edge_margin)[rows, urc]
+        rejected["edge_margin"] = int((keep & ~margin_ok).sum())
+        keep = margin_ok
+        with np.errstate(divide="ignore"):
+            depth = np.float32(pair.f * pair.baseline) / raw
+        range_ok = keep & (depth >= c.min_depth) & (depth <= c.max_depth)
+        rejected["depth_range"] = int((keep & ~range_ok).sum())
+        disparity = np.where(range_ok, raw, np.nan).astype(np.float32)
+        return Disparity(pair, disparity, np.where(range_ok, depth, np.nan).astype(np.float32), rejected)
+
+    def _match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """SGBM disparity in pixels; both images are padded on the left so that SGBM's blind
+        band (the first ``num_disparities`` columns) falls outside the image."""
+        n = self.config.num_disparities
+        pad = [cv2.copyMakeBorder(np.ascontiguousarray(im), 0, 0, n, 0, cv2.BORDER_CONSTANT, value=0)
+               for im in (left, right)]
+        return self._sgbm.compute(*pad)[:, n:].astype(np.float32) / 16.0
+
+    def cloud(self, ref: Frame, other: Frame) -> tuple[PointCloud, Disparity]:
+        """Points seen from ``ref`` (origin = ref's camera centre, stamp = ref's stamp)."""
+        disp = self.disparity(ref, other)
+        pair = disp.pair
+        v, u = np.nonzero(np.isfinite(disp.depth))
+        z = disp.depth[v, u]
+        canon = np.stack([(u - pair.cx) * z / pair.f, (v - pair.cy) * z / pair.f, z], axis=1)
+        cam = canon @ pair.to_camera.T
+        xy = pair.source_xy[v, u]
+        hh, ww = ref.image.shape[:2]
+        px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
+        py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
+        return camera_points_to_cloud(ref, cam, ref.image[py, px], xy), disp
+
+
+def _eroded(mask: np.ndarray, margin: int) -> np.ndarray:
+    if margin <= 0:
+        return mask
+    k = np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)
+    return cv2.erode(mask.astype(np.uint8), k, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
