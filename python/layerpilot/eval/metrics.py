@@ -121,29 +121,41 @@ def _nearest_in_neighbourhood(pts: np.ndarray, ref: np.ndarray, lo: np.ndarray, 
     dims = np.maximum(qc.max(0), rc.max(0)) + 2
     rkey = (rc[:, 0] * dims[1] + rc[:, 1]) * dims[2] + rc[:, 2]
     order = np.argsort(rkey, kind="stable")
-    rkey, rsorted = rkey[order], ref[order]
+    rsorted = ref[order]
+    cells, cell_start, cell_count = np.unique(rkey[order], return_index=True, return_counts=True)
+    # Queries sorted by cell key: a neighbour offset adds a constant to the key, so every
+    # needle array below is sorted too, which keeps searchsorted cache-friendly.
+    qkey = (qc[:, 0] * dims[1] + qc[:, 1]) * dims[2] + qc[:, 2]
+    qorder = np.argsort(qkey, kind="stable")
+    qkey, qpts = qkey[qorder], pts[qorder]
     best = np.full(len(pts), np.inf)
-    for off in np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij")).reshape(3, -1).T:
-        c = qc + off
-        key = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
-        start = np.searchsorted(rkey, key, "left")
-        count = np.searchsorted(rkey, key, "right") - start
-        has = np.flatnonzero(count)
-        cum = np.cumsum(count[has])
+    qxyz = [np.ascontiguousarray(qpts[:, a]) for a in range(3)]
+    rxyz = [np.ascontiguousarray(rsorted[:, a]) for a in range(3)]
+    own_cell_first = [(0, 0, 0)] + [(a - 1, b - 1, c - 1) for a, b, c in np.ndindex(3, 3, 3) if (a, b, c) != (1, 1, 1)]
+    active = np.arange(len(pts))
+    for i, (dx, dy, dz) in enumerate(own_cell_first):
+        if i == 1:  # queries sitting on a reference point (distance 0) are done
+            active = np.flatnonzero(best > 0)
+        key = qkey[active] + (dx * dims[1] + dy) * dims[2] + dz
+        slot = np.minimum(np.searchsorted(cells, key), len(cells) - 1)
+        hit = np.flatnonzero(cells[slot] == key)
+        has = active[hit]
+        start, count = cell_start[slot[hit]], cell_count[slot[hit]]
+        cum = np.cumsum(count)
         first = 0
         while first < len(has):  # batches of at most _MAX_PAIRS candidate pairs
             base = cum[first - 1] if first else 0
             last = max(int(np.searchsorted(cum, base + _MAX_PAIRS, "right")), first + 1)
-            q = has[first:last]
-            n = count[q]
+            q, n = has[first:last], count[first:last]
+            group = np.cumsum(n) - n
             qi = np.repeat(q, n)
-            within = np.arange(len(qi)) - np.repeat(np.cumsum(n) - n, n)
-            ri = np.repeat(start[q], n) + within
-            d2 = np.sum((pts[qi] - rsorted[ri]) ** 2, axis=1)
-            group_min = np.minimum.reduceat(d2, np.cumsum(n) - n)
-            best[q] = np.minimum(best[q], group_min)
+            ri = np.repeat(start[first:last] - group, n) + np.arange(len(qi))
+            d2 = sum((q_a[qi] - r_a[ri]) ** 2 for q_a, r_a in zip(qxyz, rxyz))
+            best[q] = np.minimum(best[q], np.minimum.reduceat(d2, group))
             first = last
-    return np.sqrt(best)
+    out = np.empty(len(pts))
+    out[qorder] = np.sqrt(best)
+    return out
 
 
 def voxel_metrics(est: np.ndarray, gt: np.ndarray, d_v: float = D_V) -> VoxelMetrics:
