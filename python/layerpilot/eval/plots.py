@@ -6,6 +6,7 @@ matplotlib's Agg backend only (no display); every function writes one PNG and re
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -48,11 +49,12 @@ def plot_metric(runs: Mapping[str, Sequence[MetricSeries]], metric: str, path: s
         n = min(len(s) for s in series)
         t = series[0].column("t")[:n]
         values = np.array([s.column(metric)[:n] for s in series])
-        with np.errstate(all="ignore"):
-            mean = np.nanmean(values, axis=0) if len(series) > 1 else values[0]
+        with warnings.catch_warnings():  # all-NaN samples (nothing mapped yet) stay NaN, silently
+            warnings.simplefilter("ignore", RuntimeWarning)
+            low, mean, high = np.nanmin(values, 0), np.nanmean(values, 0), np.nanmax(values, 0)
         (line,) = ax.plot(t, mean, label=label)
         if len(series) > 1:
-            ax.fill_between(t, np.nanmin(values, axis=0), np.nanmax(values, axis=0), color=line.get_color(), alpha=0.2)
+            ax.fill_between(t, low, high, color=line.get_color(), alpha=0.2)
     ax.set_xlabel("simulated time (s)")
     ax.set_ylabel(LABELS.get(metric, metric))
     ax.grid(alpha=0.3)

@@ -1,0 +1,116 @@
+"""Run and study reports from what a mission leaves behind: series, layers, path, settings.
+
+A run directory holds ``metrics.csv`` (the time series) and ``metrics.json`` (the final
+values under ``"final"``); the study report is built from run directories alone, so a
+study can be re-reported without flying again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from layerpilot.eval.plots import LABELS, plot_flight_path, plot_layer, plot_metric
+from layerpilot.eval.report import Report, format_value
+from layerpilot.eval.series import MetricSeries
+from layerpilot.map.columns import ColumnLayers
+
+# The paper's Table 1 columns.
+TABLE1 = ["percent_mapped", "avg_time_since_observed", "avg_min_distance", "paper_recall", "paper_mse"]
+TABLE1_HEADERS = ["percent observed (%)", "avg time (s)", "avg distance (m)", "3D recall", "3D MSE (m)"]
+STANDARD_3D = ["precision", "recall", "f_score"]
+
+
+def write_run_report(
+    run_dir: str | os.PathLike,
+    title: str,
+    series: MetricSeries,
+    layers: ColumnLayers,
+    aoi: np.ndarray,
+    path_xy: np.ndarray,
+    layer_images: Mapping[str, np.ndarray],
+    settings: Mapping[str, Any],
+) -> dict[str, Path]:
+    """Write the CSV, plots and report.html/.md/metrics.json of one mission into ``run_dir``."""
+    out = Path(run_dir)
+    plots = out / "plots"
+    plots.mkdir(parents=True, exist_ok=True)
+    series.to_csv(out / "metrics.csv")
+    final = series.last()
+    report = Report(title)
+    report.heading("Final metrics")
+    report.table(["metric", "value"], [[LABELS.get(k, k), v] for k, v in final.items() if k != "t"])
+    report.text(f"Sampled every 10 simulated seconds; last sample at t = {final['t']:.1f} s.")
+    report.heading("Settings")
+    report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
+    report.heading("Metrics over time")
+    for name in series.names:
+        report.image(plot_metric({title: [series]}, name, plots / f"metric_{name}.png"), LABELS.get(name, name))
+    report.heading("Flight path")
+    report.image(
+        plot_flight_path(layers, path_xy, aoi, plots / "flight_path.png", title),
+        "flight path over the color layer; yellow: area of interest",
+    )
+    report.heading("Final layers")
+    for name, values in layer_images.items():
+        report.image(plot_layer(values, layers, plots / f"layer_{name}.png", name), name)
+    metrics = {"final": final, "settings": dict(settings)}
+    return report.write(out, metrics)
+
+
+def mean_spread(values: Sequence[float]) -> str:
+    """``mean ± std`` over seeds (NaNs ignored), or the single value."""
+    finite = [v for v in values if v is not None and not math.isnan(v)]
+    if not finite:
+        return format_value(float("nan"))
+    if len(finite) == 1:
+        return format_value(float(finite[0]))
+    return f"{np.mean(finite):.4g} ± {np.std(finite, ddof=1):.2g}"
+
+
+def study_table(finals: Mapping[str, Sequence[Mapping[str, float]]], keys: Sequence[str]) -> list[list[str]]:
+    """One row per behavior: its name, then mean ± spread over seeds of each key."""
+    return [[behavior] + [mean_spread([run[k] for run in runs]) for k in keys] for behavior, runs in finals.items()]
+
+
+def _final(run_dir: Path) -> dict[str, float]:
+    final = json.loads((run_dir / "metrics.json").read_text())["final"]
+    return {k: float("nan") if v is None else float(v) for k, v in final.items()}
+
+
+def write_study_report(
+    out_dir: str | os.PathLike, runs: Mapping[str, Sequence[str | os.PathLike]], settings: Mapping[str, Any]
+) -> dict[str, Path]:
+    """Compare behaviors from their run directories (several seeds each): Table 1, plots, paths."""
+    if not runs or any(not dirs for dirs in runs.values()):
+        raise ValueError("runs: every behavior needs at least one run directory")
+    out = Path(out_dir)
+    plots = out / "plots"
+    plots.mkdir(parents=True, exist_ok=True)
+    dirs = {b: [Path(d) for d in ds] for b, ds in runs.items()}
+    series = {b: [MetricSeries.read_csv(d / "metrics.csv") for d in ds] for b, ds in dirs.items()}
+    finals = {b: [_final(d) for d in ds] for b, ds in dirs.items()}
+    report = Report("Behavior study")
+    report.heading("Table 1: final metrics (mean ± std over seeds)")
+    report.table(["behavior"] + TABLE1_HEADERS, study_table(finals, TABLE1))
+    report.heading("Standard 3D metrics at d_v = 4 m")
+    report.table(["behavior", "precision", "recall (completeness)", "F-score"], study_table(finals, STANDARD_3D))
+    report.heading("Settings")
+    report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
+    report.heading("Metrics over time")
+    for name in next(iter(series.values()))[0].names:
+        report.image(plot_metric(series, name, plots / f"metric_{name}.png"), LABELS.get(name, name))
+    report.heading("Flight paths and final layers (first seed)")
+    for behavior, ds in dirs.items():
+        for png in sorted((ds[0] / "plots").glob("flight_path.png")) + sorted((ds[0] / "plots").glob("layer_*.png")):
+            report.image(png, f"{behavior}: {png.stem.replace('_', ' ')}")
+    metrics = {
+        "behaviors": {b: {"runs": [str(d) for d in ds], "final": finals[b]} for b, ds in dirs.items()},
+        "settings": dict(settings),
+    }
+    return report.write(out, metrics)
