@@ -14,6 +14,8 @@ import sys
 
 COMMAND_MODULES = [
     "layerpilot.map.commands",
+    "layerpilot.nodes.commands",
+    "layerpilot.sim.commands",
 ]
 
 

@@ -1,0 +1,1 @@
+"""The Zenoh bus: session configuration, key names, protobuf message codecs, rejection of bad input."""

@@ -1,0 +1,176 @@
+"""Layer sets on the bus: a grid geometry plus named 2D layers in a compact encoding.
+
+Floats travel as float16 or as uint8/uint16 with scale and offset (the top three codes
+mean -inf, +inf and NaN), booleans as packed bits, colors raw; everything zlib'd. If a set
+would exceed ``max_bytes`` (1 MB by default) quantized layers fall back to uint8, and a set
+that is still too big is refused with its size, so a query cannot flood the bus.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from layerpilot.bus import arrays
+from layerpilot.bus.keys import check_vehicle
+from layerpilot.bus.messages import _finite, _vehicle, parse
+from layerpilot.bus.proto_gen import messages_pb2 as pb
+from layerpilot.bus.reject import BadMessage
+from layerpilot.grid import GridGeometry
+from layerpilot.map.columns import ColumnLayers
+
+MAX_BYTES = 1_000_000
+ENCODINGS = {"raw": pb.Layer.RAW, "float16": pb.Layer.FLOAT16, "uint8": pb.Layer.UINT8,
+             "uint16": pb.Layer.UINT16, "bits": pb.Layer.BITS}
+_QUANT = {pb.Layer.UINT8: np.uint8, pb.Layer.UINT16: np.uint16}
+# how the map server's column layers travel unless asked otherwise
+COLUMN_ENCODINGS = {"observed": "bits", "elevation": "float16", "color": "raw",
+                    "last_seen": "uint16", "min_distance": "float16"}
+
+
+@dataclass(frozen=True)
+class LayerSet:
+    stamp: float
+    vehicle: str
+    geometry: GridGeometry
+    layers: dict[str, np.ndarray]  # each (height, width) or (height, width, channels)
+
+
+def column_arrays(cl: ColumnLayers, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
+    """The named arrays of a ColumnLayers (all of them by default); ValueError names an unknown one."""
+    names = tuple(COLUMN_ENCODINGS) if names is None else names
+    unknown = [n for n in names if n not in COLUMN_ENCODINGS]
+    if unknown:
+        raise ValueError(f"layers: unknown {', '.join(unknown)}; known: {', '.join(COLUMN_ENCODINGS)}")
+    return {n: getattr(cl, n) for n in names}
+
+
+def _quantize(m: pb.Layer, arr: np.ndarray, enc: int) -> None:
+    qt = _QUANT[enc]
+    top = int(np.iinfo(qt).max)
+    levels = top - 3  # codes 0..levels are values; top-2 = -inf, top-1 = +inf, top = NaN
+    a = arr.astype(np.float64)
+    finite = np.isfinite(a)
+    lo = float(a[finite].min()) if finite.any() else 0.0
+    hi = float(a[finite].max()) if finite.any() else 0.0
+    scale = (hi - lo) / levels if hi > lo else 1.0
+    q = np.zeros(a.shape, qt)
+    q[finite] = np.rint((a[finite] - lo) / scale).astype(qt)
+    q[np.isneginf(a)] = top - 2
+    q[np.isposinf(a)] = top - 1
+    q[np.isnan(a)] = top
+    m.scale, m.offset = scale, lo
+    arrays.to_proto(q, m.data, compress=True)
+
+
+def encode_layer(m: pb.Layer, name: str, arr: np.ndarray, encoding: str) -> None:
+    arr = np.asarray(arr)
+    if encoding not in ENCODINGS:
+        raise ValueError(f"encoding: unknown {encoding!r} for layer {name}; known: {', '.join(ENCODINGS)}")
+    enc = ENCODINGS[encoding]
+    m.name, m.encoding, m.dtype = name, enc, arr.dtype.name
+    if enc == pb.Layer.BITS:
+        if arr.dtype != np.bool_:
+            raise ValueError(f"layers[{name}]: bits encoding needs a bool array, got {arr.dtype}")
+        arrays.to_proto(np.packbits(arr.ravel()), m.data, compress=True)
+        m.data.shape[:] = arr.shape  # the logical shape; data holds ceil(size / 8) bytes
+    elif enc == pb.Layer.RAW:
+        arrays.to_proto(arr, m.data, compress=True)
+    elif arr.dtype.kind != "f":
+        raise ValueError(f"layers[{name}]: {encoding} encoding needs a float array, got {arr.dtype}")
+    elif enc == pb.Layer.FLOAT16:
+        arrays.to_proto(arr.astype(np.float16), m.data, compress=True)
+    else:
+        _quantize(m, arr, enc)
+
+
+def encode_layer_set(ls: LayerSet, encodings: dict[str, str] | None = None, *, max_bytes: int = MAX_BYTES) -> bytes:
+    """Serialize ``ls``; ``encodings`` overrides the per-layer default (COLUMN_ENCODINGS, else raw)."""
+    g = ls.geometry
+    chosen = {n: (encodings or {}).get(n, COLUMN_ENCODINGS.get(n, "raw")) for n in ls.layers}
+    for attempt in range(2):
+        m = pb.LayerSet(stamp=float(ls.stamp), vehicle=check_vehicle(ls.vehicle))
+        m.grid.CopyFrom(pb.GridGeometry(origin_x=g.origin_x, origin_y=g.origin_y, resolution=g.resolution,
+                                        width=g.width, height=g.height))
+        for name, arr in ls.layers.items():
+            if np.shape(arr)[:2] != g.shape:
+                raise ValueError(f"layers[{name}]: shape {np.shape(arr)} does not match the grid {g.shape}")
+            encode_layer(m.layers.add(), name, arr, chosen[name])
+        data = m.SerializeToString()
+        if len(data) <= max_bytes:
+            return data
+        chosen = {n: "uint8" if e in ("float16", "uint16") else e for n, e in chosen.items()}
+    raise ValueError(f"layer set of {g.width}x{g.height} with {', '.join(ls.layers)} is {len(data)} bytes, "
+                     f"more than max_bytes={max_bytes}; ask for a smaller window or fewer layers")
+
+
+def decode_layer(m: pb.Layer, shape: tuple[int, int]) -> np.ndarray:
+    where = f"layers[{m.name}]"
+    if m.encoding == pb.Layer.BITS:
+        dims = tuple(m.data.shape)
+        if dims[:2] != shape:
+            raise BadMessage("bad shape", f"{where}: shape {dims} does not match the grid {shape}")
+        count = int(np.prod(dims, dtype=np.int64))
+        if count > arrays.MAX_ITEMS:
+            raise BadMessage("bad shape", f"{where}: {count} cells is more than the limit")
+        packed_msg = pb.Array()
+        packed_msg.CopyFrom(m.data)
+        packed_msg.shape[:] = [(count + 7) // 8]
+        packed = arrays.from_proto(packed_msg, where, dtype="uint8")
+        return np.unpackbits(packed, count=count).astype(bool).reshape(dims)
+    if m.encoding == pb.Layer.RAW:
+        arr = arrays.from_proto(m.data, where)
+    elif m.encoding == pb.Layer.FLOAT16:
+        arr = arrays.from_proto(m.data, where, dtype="float16")
+        arr = arr.astype(m.dtype if m.dtype in ("float32", "float64") else np.float32)
+    elif m.encoding in _QUANT:
+        qt = _QUANT[m.encoding]
+        q = arrays.from_proto(m.data, where, dtype=np.dtype(qt).name)
+        if not (math.isfinite(m.scale) and math.isfinite(m.offset)):
+            raise BadMessage("not finite", f"{where}: scale/offset")
+        top = int(np.iinfo(qt).max)
+        out_dtype = m.dtype if m.dtype in ("float32", "float64") else "float32"
+        arr = (m.offset + m.scale * q.astype(np.float64)).astype(out_dtype)
+        arr[q == top - 2] = -np.inf
+        arr[q == top - 1] = np.inf
+        arr[q == top] = np.nan
+    else:
+        raise BadMessage("bad encoding", f"{where}: unknown encoding {m.encoding}")
+    if arr.shape[:2] != shape or arr.ndim not in (2, 3):
+        raise BadMessage("bad shape", f"{where}: shape {arr.shape} does not match the grid {shape}")
+    return arr
+
+
+def decode_layer_set(payload: bytes) -> LayerSet:
+    m = parse(pb.LayerSet, payload)
+    g = m.grid
+    try:
+        geometry = GridGeometry(_finite(g.origin_x, "grid.origin_x"), _finite(g.origin_y, "grid.origin_y"),
+                                _finite(g.resolution, "grid.resolution"), g.width, g.height)
+    except ValueError as exc:
+        if isinstance(exc, BadMessage):
+            raise
+        raise BadMessage("bad grid", str(exc)) from None
+    if g.width * g.height > arrays.MAX_ITEMS:
+        raise BadMessage("bad grid", f"{g.width}x{g.height} cells is more than the limit")
+    layers: dict[str, np.ndarray] = {}
+    for lm in m.layers:
+        if not lm.name or lm.name in layers:
+            raise BadMessage("bad layer name", f"empty or repeated layer name {lm.name!r}")
+        layers[lm.name] = decode_layer(lm, geometry.shape)
+    return LayerSet(_finite(m.stamp, "stamp"), _vehicle(m), geometry, layers)
+
+
+def to_column_layers(ls: LayerSet) -> ColumnLayers:
+    """Rebuild ColumnLayers from a set holding all five column arrays (as the map server publishes)."""
+    missing = [n for n in COLUMN_ENCODINGS if n not in ls.layers]
+    if missing:
+        raise BadMessage("missing layer", ", ".join(missing))
+    kinds = {"observed": np.bool_, "elevation": np.float32, "color": np.uint8,
+             "last_seen": np.float64, "min_distance": np.float32}
+    try:
+        return ColumnLayers(ls.geometry, **{n: np.asarray(ls.layers[n]).astype(t, copy=False) for n, t in kinds.items()})
+    except ValueError as exc:
+        raise BadMessage("bad layer", str(exc)) from None

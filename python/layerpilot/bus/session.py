@@ -1,0 +1,83 @@
+"""Opening a Zenoh session the layerpilot way.
+
+Default: a peer on loopback, multicast scouting off, explicit endpoints. The first node
+to start listens on ``tcp/127.0.0.1:7447`` (Zenoh's usual port, so an outside peer can
+join the way ROS 2 users expect); later nodes find the port taken, listen on a free one
+and connect to the first. ``mode = "router"``/``"client"`` is for several machines.
+TLS and access control are Zenoh's own settings, passed through unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import zenoh
+
+from layerpilot.config import ConfigError
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+_log = logging.getLogger("layerpilot.bus")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """The ``[bus]`` table of a mission file."""
+
+    mode: Literal["peer", "router", "client"] = "peer"
+    endpoint: str = DEFAULT_ENDPOINT  # the well-known endpoint: listened on by the first peer / the router
+    listen: list[str] = field(default_factory=list)  # extra listen endpoints (e.g. tls/0.0.0.0:7448)
+    connect: list[str] = field(default_factory=list)  # extra endpoints to connect to
+    multicast_scouting: bool = False
+    transport: dict[str, Any] = field(default_factory=dict)  # Zenoh "transport" table (TLS certificates, auth)
+    access_control: dict[str, Any] = field(default_factory=dict)  # Zenoh "access_control" table, as documented by Zenoh
+
+    def __post_init__(self) -> None:
+        for ep in (self.endpoint, *self.listen, *self.connect):
+            if "/" not in ep:
+                raise ConfigError(f"bus endpoint {ep!r} is not a Zenoh locator like tcp/127.0.0.1:7447")
+
+
+def zenoh_config(cfg: BusConfig, *, listen: list[str], connect: list[str]) -> zenoh.Config:
+    """The zenoh.Config of ``cfg`` with the given endpoints (JSON5 inserts, so every key Zenoh knows works)."""
+    z = zenoh.Config()
+    z.insert_json5("mode", json.dumps(cfg.mode))
+    z.insert_json5("scouting/multicast/enabled", json.dumps(cfg.multicast_scouting))
+    z.insert_json5("listen/endpoints", json.dumps(listen))
+    z.insert_json5("connect/endpoints", json.dumps(connect))
+    try:
+        for key, value in cfg.transport.items():
+            z.insert_json5(f"transport/{key}", json.dumps(value))
+        if cfg.access_control:
+            z.insert_json5("access_control", json.dumps(cfg.access_control))
+    except zenoh.ZError as exc:
+        raise ConfigError(f"bus: Zenoh rejected the transport/access_control settings: {exc}") from None
+    return z
+
+
+def open_session(cfg: BusConfig | None = None) -> zenoh.Session:
+    """Open a session per ``cfg`` (see the module docstring for who listens and who connects)."""
+    cfg = cfg or BusConfig()
+    if cfg.mode == "client":
+        return zenoh.open(zenoh_config(cfg, listen=[], connect=[cfg.endpoint, *cfg.connect]))
+    if cfg.mode == "router":
+        return zenoh.open(zenoh_config(cfg, listen=[cfg.endpoint, *cfg.listen], connect=list(cfg.connect)))
+    try:
+        return zenoh.open(zenoh_config(cfg, listen=[cfg.endpoint, *cfg.listen], connect=list(cfg.connect)))
+    except zenoh.ZError as exc:
+        if "already in use" not in str(exc).lower():
+            raise
+    host = cfg.endpoint.rsplit(":", 1)[0]
+    _log.debug("%s is taken: listening on a free port and connecting to it", cfg.endpoint)
+    return zenoh.open(zenoh_config(cfg, listen=[f"{host}:0", *cfg.listen], connect=[cfg.endpoint, *cfg.connect]))
+
+
+def free_endpoint() -> str:
+    """A loopback TCP endpoint on a port that is free right now (tests, benchmarks)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
