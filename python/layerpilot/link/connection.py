@@ -1,0 +1,34 @@
+"""Open a MAVLink 2 connection by URL (pymavlink) with the ids layerpilot speaks with."""
+
+from __future__ import annotations
+
+import os
+import re
+
+from pymavlink import mavutil
+
+_NETWORK = re.compile(r"^(tcp|tcpin|udp|udpin|udpout|udpbcast):[^:]*:\d+$")
+_SERIAL = re.compile(r"^(?:serial:)?(/dev/[^:]+|COM\d+)(?::(\d+))?$")
+
+
+def parse_url(url: str, baud: int = 57600) -> tuple[str, int]:
+    """``tcp:HOST:PORT``, ``udpin:HOST:PORT``, ``udpout:HOST:PORT`` or a serial device
+    (``/dev/ttyUSB0``, ``/dev/ttyACM0:921600``, ``serial:/dev/ttyAMA0:57600``) -> (device, baud)."""
+    if _NETWORK.match(url):
+        return url, baud
+    serial = _SERIAL.match(url)
+    if serial:
+        return serial.group(1), int(serial.group(2) or baud)
+    raise ValueError(f"url: expected tcp:HOST:PORT, udpin:HOST:PORT, udpout:HOST:PORT or a serial device "
+                     f"like /dev/ttyUSB0:57600, got {url!r}")
+
+
+def open_connection(url: str, source_system: int, source_component: int, baud: int = 57600):
+    """A pymavlink connection speaking MAVLink 2 with the ardupilotmega dialect (a superset of common)."""
+    device, baud = parse_url(url, baud)
+    os.environ["MAVLINK20"] = "1"  # pymavlink picks the wire protocol from the environment
+    conn = mavutil.mavlink_connection(device, baud=baud, source_system=source_system,
+                                      source_component=source_component, dialect="ardupilotmega",
+                                      autoreconnect=True)
+    conn.WIRE_PROTOCOL_VERSION = "2.0"
+    return conn
