@@ -14,6 +14,7 @@ import sys
 
 COMMAND_MODULES = [
     "layerpilot.map.commands",
+    "layerpilot.sim.commands",
     "layerpilot.nodes.commands",
     "layerpilot.sim.commands",
 ]

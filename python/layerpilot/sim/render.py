@@ -170,11 +170,12 @@ def projection(K: np.ndarray, width: int, height: int, near: float, far: float) 
 class Renderer:
     """Draws one world from one camera model; reuse it for every frame (the context is costly to make)."""
 
-    def __init__(self, world: World, camera: CameraConfig | None = None) -> None:
+    def __init__(self, world: World, camera: CameraConfig | None = None, cull: bool = True) -> None:
         import moderngl
 
         self.world = world
         self.camera = camera or CameraConfig()
+        self.cull = cull  # False draws every tile (the reference for `layerpilot bench sim`)
         self.K = self.camera.K
         c = self.camera
         self.ctx = create_context()
@@ -215,7 +216,7 @@ class Renderer:
         self._fbo.use()
         ctx.enable(self._moderngl.DEPTH_TEST)
         self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        visible = self._visible_tiles(view)
+        visible = self._visible_tiles(view) if self.cull else np.ones(len(self.world.tile_ranges), bool)
         self.last_tiles_drawn = int(visible.sum())
         for start, count in self.world.tile_ranges[visible]:
             self._vao.render(self._moderngl.TRIANGLES, vertices=int(count) * 3, first=int(start) * 3)
