@@ -16,7 +16,6 @@ COMMAND_MODULES = [
     "layerpilot.map.commands",
     "layerpilot.sim.commands",
     "layerpilot.nodes.commands",
-    "layerpilot.sim.commands",
 ]
 
 
