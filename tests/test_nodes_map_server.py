@@ -1,0 +1,154 @@
+"""The map server on real Zenoh sessions over loopback: insert, query, publish, drop oldest, snapshot, SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from layerpilot.bus import messages as msg
+from layerpilot.bus.keys import Keys
+from layerpilot.bus.layerset import decode_layer_set, to_column_layers
+from layerpilot.bus.proto_gen import messages_pb2 as pb
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.map import VoxelMap
+from layerpilot.nodes.map_server import MapServer, MapServerConfig
+
+K = Keys("uav1")
+
+
+def wait_for(cond, what: str, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def ground_cloud(stamp: float, z: float = 0.0, n: int = 40) -> msg.Cloud:
+    """A flat square of ground 20 m x 20 m at height z, seen from 10 m above its centre."""
+    xs, ys = np.meshgrid(np.linspace(-9.9, 9.9, n), np.linspace(-9.9, 9.9, n))
+    pts = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, z)], 1).astype(np.float32)
+    return msg.Cloud(stamp, "uav1", int(stamp), pts, np.array([0.0, 0.0, z + 10.0]))
+
+
+def get_one(session, selector: str):
+    replies = list(session.get(selector, timeout=10.0))
+    assert len(replies) == 1, selector
+    r = replies[0]
+    if r.ok is None:
+        raise ValueError(r.err.payload.to_bytes().decode())
+    return r.ok.payload.to_bytes()
+
+
+@pytest.fixture
+def bus():
+    ep = free_endpoint()
+    server_session = open_session(BusConfig(endpoint=ep))
+    client = open_session(BusConfig(endpoint=ep))
+    yield server_session, client
+    client.close()
+    server_session.close()
+
+
+def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
+    server_session, client = bus
+    cfg = MapServerConfig(resolution=0.5, layers_rate=5.0, window=(-10.0, -10.0, 40, 40),
+                          snapshot=str(tmp_path / "map.ot"), snapshot_period=0.5)
+    server = MapServer(server_session, cfg)
+    server.start()
+    published = []
+    sub = client.declare_subscriber(K.layers, lambda s: published.append(s.payload.to_bytes()))
+    try:
+        time.sleep(0.5)  # let the subscriptions propagate
+        for i in range(5):
+            client.put(K.cloud, msg.encode_cloud(ground_cloud(float(i + 1))))
+        wait_for(lambda: server.counters.clouds_inserted == 5, "5 inserts")
+        assert server.counters.points_inserted == 5 * 1600
+
+        ls = decode_layer_set(get_one(client, K.service("layers") + "?x=-10;y=-10;w=40;h=40"))
+        cl = to_column_layers(ls)
+        assert ls.geometry.shape == (40, 40) and ls.stamp == 5.0
+        assert cl.observed.all()  # the whole 20 m x 20 m window is ground
+        np.testing.assert_allclose(cl.elevation, 0.5, atol=1e-3)  # top face of the voxel holding z = 0
+        np.testing.assert_allclose(cl.last_seen, 5.0, atol=1e-3)
+
+        part = decode_layer_set(get_one(client, K.service("layers") + "?x=0;y=0;w=4;h=2;layers=elevation"))
+        assert list(part.layers) == ["elevation"] and part.layers["elevation"].shape == (2, 4)
+
+        stats = pb.MapStats.FromString(get_one(client, K.service("stats")))
+        assert stats.clouds_inserted == 5 and stats.leaves > 1600 and stats.resolution == 0.5
+
+        vox = pb.VoxelSet.FromString(get_one(client, K.service("voxels") + "?min=-2,-2,-1;max=2,2,1"))
+        assert tuple(vox.centers.shape) == (64, 3)  # 8 x 8 ground voxels of 0.5 m
+
+        with pytest.raises(ValueError, match="w, h"):
+            get_one(client, K.service("layers") + "?w=0")
+        with pytest.raises(ValueError, match="min"):
+            get_one(client, K.service("voxels"))
+
+        wait_for(lambda: len(published) >= 2, "published layer sets")
+        assert decode_layer_set(published[-1]).geometry.shape == (40, 40)
+        wait_for(lambda: server.counters.snapshots_written >= 1, "a periodic snapshot")
+        save = pb.SaveReply.FromString(get_one(client, K.service("save")))
+        assert Path(save.path) == (tmp_path / "map.ot").resolve() and save.bytes > 0
+    finally:
+        sub.undeclare()
+        server.stop()
+
+    reloaded = MapServer(server_session, cfg)  # a restart reloads the snapshot
+    assert reloaded.map.stats()["leaves"] == server.map.stats()["leaves"]
+    assert reloaded.map.column_layers(-10, -10, 40, 40).observed.all()
+
+
+def test_full_queue_drops_oldest_and_stays_bounded(bus):
+    server_session, client = bus
+    server = MapServer(server_session, MapServerConfig(resolution=0.5, queue_size=3, snapshot=""))
+    # no worker yet: every cloud waits in the queue, so the drops are deterministic
+    for i in range(10):
+        server._enqueue(ground_cloud(float(i)), K.cloud)
+    assert server.pending() == 3 and server.counters.clouds_dropped == 7
+    assert [c.stamp for c in server._queue] == [7.0, 8.0, 9.0]  # the newest survive
+    server.start()
+    wait_for(lambda: server.counters.clouds_inserted == 3, "3 inserts")
+    server.stop()
+
+
+def test_daemon_process_serves_and_exits_on_sigterm(tmp_path):
+    ep = free_endpoint()
+    snap = tmp_path / "map.ot"
+    proc = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "map-server", "--endpoint", ep,
+                             "--snapshot", str(snap), "--status-every", "0.2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    client = None
+    try:
+        assert json.loads(proc.stdout.readline())["status"] == "ready"
+        client = open_session(BusConfig(endpoint=ep))
+        time.sleep(0.5)
+        client.put(K.cloud, msg.encode_cloud(ground_cloud(1.0)))
+        client.put(K.cloud, b"\x00garbage")
+
+        def inserted() -> bool:
+            return pb.MapStats.FromString(get_one(client, K.service("stats"))).clouds_inserted == 1
+
+        wait_for(inserted, "the daemon's insert")
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+        assert proc.returncode == 0, err
+        last = json.loads(out.strip().splitlines()[-1])
+        assert last["inserted"] == 1 and last["rejected"] == 1
+        assert "not protobuf" in err  # logged once with the reason
+        assert VoxelMap.load(snap).column_layers(-10, -10, 40, 40).observed.all()  # final snapshot on exit
+    finally:
+        if client is not None:
+            client.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
