@@ -60,7 +60,8 @@ def _set_vec(v: pb.Vec3, xyz: np.ndarray | tuple[float, float, float]) -> None:
 def _quat(q: pb.Quaternion, name: str) -> np.ndarray:
     out = np.array([q.w, q.x, q.y, q.z], np.float64)
     arrays.require_finite(out, name)
-    norm = float(np.linalg.norm(out))
+    with np.errstate(over="ignore"):
+        norm = float(np.linalg.norm(out))
     if abs(norm - 1.0) > 1e-3:
         raise BadMessage("bad quaternion", f"{name}: norm {norm:.4g}, expected 1")
     return out

@@ -1,0 +1,125 @@
+"""Thousands of malformed payloads: every decoder rejects each with a reason, the map server keeps serving."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from layerpilot.bus import messages as msg
+from layerpilot.bus.keys import Keys
+from layerpilot.bus.layerset import LayerSet, decode_layer_set, encode_layer_set
+from layerpilot.bus.proto_gen import messages_pb2 as pb
+from layerpilot.bus.reject import BadMessage
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.grid import GridGeometry
+from layerpilot.nodes.map_server import MapServer, MapServerConfig
+
+rng = np.random.default_rng(11)
+Q = np.array([1.0, 0, 0, 0])
+GOOD = {
+    msg.decode_cloud: msg.encode_cloud(msg.Cloud(1.0, "uav1", 1, rng.normal(size=(50, 3)).astype(np.float32),
+                                                 np.zeros(3), rng.integers(0, 256, (50, 3), dtype=np.uint8))),
+    msg.decode_frame: msg.encode_frame(msg.Frame(1.0, "uav1", 1, rng.integers(0, 256, (8, 10, 3), dtype=np.uint8),
+                                                 (10, 10, 5, 4), np.zeros(3), Q, np.ones((8, 10), np.float32))),
+    msg.decode_state: msg.encode_state(msg.State(1.0, "uav1", np.zeros(3), Q)),
+    msg.decode_waypoint: msg.encode_waypoint(msg.Waypoint(1.0, "uav1", 1, np.ones(3))),
+    msg.decode_decision: msg.encode_decision(msg.Decision(1.0, "uav1", 1, np.ones(3), 0.5, (msg.Term("a", 1, 1, 1),))),
+    msg.decode_mission_state: msg.encode_mission_state(msg.MissionState(1.0, "uav1", "survey")),
+    decode_layer_set: encode_layer_set(LayerSet(1.0, "uav1", GridGeometry(0, 0, 1, 16, 8), {
+        "observed": rng.random((8, 16)) > 0.5, "elevation": rng.random((8, 16)).astype(np.float32),
+        "last_seen": rng.random((8, 16)), "color": rng.integers(0, 256, (8, 16, 3), dtype=np.uint8)})),
+}
+
+
+def mutations(good: bytes, n: int):
+    """Random bytes, truncations, bit flips, and arrays with wrong sizes or NaN, in equal parts."""
+    for i in range(n):
+        kind = i % 4
+        if kind == 0:
+            yield rng.integers(0, 256, int(rng.integers(1, 200)), dtype=np.uint8).tobytes()
+        elif kind == 1:
+            yield good[: int(rng.integers(0, len(good)))]
+        elif kind == 2:
+            b = bytearray(good)
+            for _ in range(int(rng.integers(1, 6))):
+                b[int(rng.integers(0, len(b)))] ^= 1 << int(rng.integers(0, 8))
+            yield bytes(b)
+        else:
+            yield _corrupt_array(good)
+
+
+def _corrupt_array(good: bytes) -> bytes:
+    """Re-serialize with one Array field made inconsistent (shape, dtype, NaN) — parses fine, must not pass."""
+    for cls in (pb.PointCloud, pb.CameraFrame, pb.LayerSet):
+        m = cls()
+        try:
+            m.ParseFromString(good)
+        except Exception:
+            continue
+        arrays = [m.points] if cls is pb.PointCloud else [m.image] if cls is pb.CameraFrame else \
+            [layer.data for layer in m.layers]
+        if not arrays or not arrays[0].dtype:
+            continue
+        a = arrays[int(rng.integers(0, len(arrays)))]
+        choice = int(rng.integers(0, 3))
+        if choice == 0:
+            a.shape[0] += 1
+        elif choice == 1:
+            a.dtype = "float64" if a.dtype != "float64" else "int64"
+        else:
+            m.stamp = float("nan")
+        return m.SerializeToString()
+    m = pb.Waypoint()
+    m.position.x = float("nan")
+    return m.SerializeToString()
+
+
+@pytest.mark.parametrize("decode", list(GOOD), ids=lambda f: f.__name__)
+def test_every_decoder_rejects_or_returns_valid(decode):
+    assert decode(GOOD[decode]) is not None
+    kinds: dict[str, int] = {}
+    accepted = 0
+    for payload in mutations(GOOD[decode], 2000):
+        try:
+            decode(payload)
+            accepted += 1  # e.g. a bit flip inside a pixel: still a well-formed message
+        except BadMessage as exc:
+            assert exc.reason
+            kinds[exc.kind] = kinds.get(exc.kind, 0) + 1
+    assert sum(kinds.values()) >= 1000, kinds
+    assert accepted < 1000
+
+
+def test_map_server_survives_thousands_of_bad_clouds():
+    ep = free_endpoint()
+    server_session = open_session(BusConfig(endpoint=ep))
+    client = open_session(BusConfig(endpoint=ep))
+    server = MapServer(server_session, MapServerConfig(resolution=0.5, snapshot="", queue_size=10_000))
+    server.start()
+    try:
+        time.sleep(0.5)
+        key = Keys("uav1").cloud
+        bad = [p for p in mutations(GOOD[msg.decode_cloud], 3000)]
+        expected_rejects = 0
+        for p in bad:
+            try:
+                msg.decode_cloud(p)
+            except BadMessage:
+                expected_rejects += 1
+            client.put(key, p)
+        client.put(key, GOOD[msg.decode_cloud])
+        end = time.monotonic() + 60
+        while server.rejects.total < expected_rejects and time.monotonic() < end:
+            time.sleep(0.05)
+        assert server.rejects.total == expected_rejects
+        assert server.counters.clouds_received == len(bad) + 1 - expected_rejects
+        kinds = server.rejects.by_kind()
+        assert {"not protobuf", "bad size"} <= set(kinds), kinds
+        reply = list(client.get(Keys("uav1").service("stats"), timeout=10))[0]
+        assert pb.MapStats.FromString(reply.ok.payload.to_bytes()).messages_rejected == expected_rejects
+    finally:
+        server.stop()
+        client.close()
+        server_session.close()
