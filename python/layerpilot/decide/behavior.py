@@ -1,0 +1,175 @@
+"""Behaviors: what the drone prefers, as a validated TOML file (presets in config/behaviors/).
+
+Every key is documented in docs/decide.md. Errors name the key with its path, e.g.
+``balanced.toml: behavior.area: radius = -5.0 must be > 0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from layerpilot.config import ConfigError, from_dict, load_toml
+from layerpilot.layers.registry import LayerOptions, layer_names, load_plugins
+
+PRESET_DIR = Path(__file__).resolve().parents[3] / "config" / "behaviors"
+
+
+def _positive(name: str, value: float) -> None:
+    if not value > 0:
+        raise ValueError(f"{name} = {value} must be > 0")
+
+
+def _check_weights(weights: dict[str, float], key: str) -> None:
+    for name, w in weights.items():
+        if not w >= 0:
+            raise ValueError(f"{key}.{name} = {w} must be >= 0")
+    if not any(w > 0 for w in weights.values()):
+        raise ValueError(f"{key}: at least one weight must be > 0")
+
+
+@dataclass(frozen=True)
+class Area:
+    """Area of interest Z: a circle around the launch point (or ``center``), or a polygon (map frame)."""
+
+    shape: Literal["circle", "polygon"] = "circle"
+    radius: float = 100.0
+    center: tuple[float, float] | None = None  # None: the launch / operator point
+    polygon: list[tuple[float, float]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        _positive("radius", self.radius)
+        if self.shape == "polygon" and len(self.polygon) < 3:
+            raise ValueError(f"polygon: a polygon area needs at least 3 (x, y) vertices, got {len(self.polygon)}")
+        if self.shape == "circle" and self.polygon:
+            raise ValueError("polygon: given but shape = 'circle'; set shape = 'polygon'")
+
+
+@dataclass(frozen=True)
+class SchedulePhase:
+    """Weights that take over once mission time or coverage of the area of interest reaches a value."""
+
+    weights: dict[str, float]
+    after_time: float | None = None  # mission seconds
+    after_coverage: float | None = None  # fraction of the area of interest observed, 0..1
+
+    def __post_init__(self) -> None:
+        if (self.after_time is None) == (self.after_coverage is None):
+            raise ValueError("give exactly one of after_time, after_coverage")
+        if self.after_time is not None and not self.after_time >= 0:
+            raise ValueError(f"after_time = {self.after_time} must be >= 0")
+        if self.after_coverage is not None and not 0 <= self.after_coverage <= 1:
+            raise ValueError(f"after_coverage = {self.after_coverage} is out of range [0, 1]")
+        _check_weights(self.weights, "weights")
+
+
+@dataclass(frozen=True)
+class Retarget:
+    """Opt-in: switch target mid-flight when another cell scores better by ``margin`` (relative)."""
+
+    enabled: bool = False
+    margin: float = 0.25  # new best must exceed the current target's score by 25%
+    min_interval: float = 5.0  # seconds between switches (hysteresis in time)
+    min_separation: float = 10.0  # metres; a nearer 'better' cell is not worth a switch
+
+    def __post_init__(self) -> None:
+        for name in ("margin", "min_interval", "min_separation"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+
+
+@dataclass(frozen=True)
+class Terrain:
+    """Opt-in: waypoint altitude = highest terrain near the path + clearance, within limits."""
+
+    enabled: bool = False
+    clearance: float = 30.0  # metres above the highest column top within the corridor
+    corridor: float = 5.0  # metres either side of the straight path to the waypoint
+    min_altitude: float = 20.0
+    max_altitude: float = 120.0
+
+    def __post_init__(self) -> None:
+        if not self.clearance >= 0:
+            raise ValueError(f"clearance = {self.clearance} must be >= 0")
+        if not self.corridor >= 0:
+            raise ValueError(f"corridor = {self.corridor} must be >= 0")
+        if not self.min_altitude <= self.max_altitude:
+            raise ValueError(f"min_altitude = {self.min_altitude} must be <= max_altitude = {self.max_altitude}")
+
+
+@dataclass(frozen=True)
+class Behavior:
+    """One behavior: layer weights, distance ring, path history, noise, altitude and options."""
+
+    weights: dict[str, float]
+    name: str = ""
+    description: str = ""
+    r_e: float = 10.0  # exclusion radius (m): never choose closer than this
+    r_i: float = 100.0  # inclusion radius (m): preference falls linearly to 0 here
+    n: float = 0.01  # path-history recovery per decision tick
+    noise: float = 1e-3  # amplitude of the seeded tie-breaking noise
+    seed: int = 0
+    altitude: float = 50.0  # waypoint z in the map frame (m)
+    plugins: list[str] = field(default_factory=list)  # modules / .py files that register layers
+    area: Area = Area()
+    layers: LayerOptions = LayerOptions()
+    schedule: list[SchedulePhase] = field(default_factory=list)
+    retarget: Retarget = Retarget()
+    terrain: Terrain = Terrain()
+
+    def __post_init__(self) -> None:
+        _check_weights(self.weights, "weights")
+        if not self.r_e >= 0:
+            raise ValueError(f"r_e = {self.r_e} must be >= 0")
+        if not self.r_i > self.r_e:
+            raise ValueError(f"r_i = {self.r_i} must be > r_e = {self.r_e}")
+        if not 0 <= self.n <= 1:
+            raise ValueError(f"n = {self.n} is out of range [0, 1]")
+        if not 0 <= self.noise <= 0.1:
+            raise ValueError(f"noise = {self.noise} is out of range [0, 0.1]")
+        _positive("altitude", self.altitude)
+
+    @property
+    def layer_names(self) -> list[str]:
+        """Every layer any phase of this behavior weights (what must be computed)."""
+        names = dict.fromkeys(self.weights)
+        for phase in self.schedule:
+            names.update(dict.fromkeys(phase.weights))
+        return list(names)
+
+
+def behavior_from_dict(data: dict, where: str = "behavior", base: Path | None = None) -> Behavior:
+    """Validate a behavior table; imports its plugins, then checks every weighted layer exists."""
+    behavior = from_dict(Behavior, data, where)
+    try:
+        load_plugins(behavior.plugins, base)
+    except ValueError as exc:
+        raise ConfigError(f"{where}.{exc}") from None
+    known = set(layer_names())
+    tables = [(f"{where}.weights", behavior.weights)]
+    tables += [(f"{where}.schedule[{i}].weights", p.weights) for i, p in enumerate(behavior.schedule)]
+    for key, weights in tables:
+        for name in weights:
+            if name not in known:
+                raise ConfigError(f"{key}.{name}: no layer named {name!r}; known: {', '.join(sorted(known))}")
+    return behavior
+
+
+def preset_names() -> list[str]:
+    return sorted(p.stem for p in PRESET_DIR.glob("*.toml"))
+
+
+def load_behavior(name_or_path: str | Path) -> Behavior:
+    """A preset by name (``balanced``) or a behavior file by path; ConfigError names the bad key."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml":
+        if not (PRESET_DIR / f"{path}.toml").is_file():
+            raise ConfigError(f"behavior {str(name_or_path)!r}: not a file and not a preset ({', '.join(preset_names())})")
+        path = PRESET_DIR / f"{path}.toml"
+    data = load_toml(path)
+    data.setdefault("name", path.stem)
+    try:
+        return behavior_from_dict(data, "behavior", path.parent)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None

@@ -1,0 +1,59 @@
+"""LayerSet: named float32 layers in [0, 1] on one grid, plus what people look at (color, elevation)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from layerpilot.grid import GridGeometry
+
+
+@dataclass(frozen=True)
+class LayerSet:
+    """Decision layers by name (float32 (h, w) in [0, 1]) with the grid they live on.
+
+    ``observed`` (bool) and ``elevation_m`` (float32 metres, NaN unobserved) travel along
+    because the decision needs coverage of the area of interest and terrain heights;
+    ``color`` (float32 (h, w, 3) in [0, 1]) is for pictures only and is never weighted.
+    """
+
+    geometry: GridGeometry
+    layers: dict[str, np.ndarray]
+    observed: np.ndarray
+    elevation_m: np.ndarray
+    color: np.ndarray
+    now: float = 0.0
+
+    def __post_init__(self) -> None:
+        shape = self.geometry.shape
+        for name, arr in self.layers.items():
+            check_layer(name, arr, shape)
+        for name, arr, want, dtype in (
+            ("observed", self.observed, shape, np.bool_),
+            ("elevation_m", self.elevation_m, shape, np.float32),
+            ("color", self.color, (*shape, 3), np.float32),
+        ):
+            if arr.shape != want or arr.dtype != dtype:
+                raise ValueError(f"{name}: expected {want} {np.dtype(dtype)}, got {arr.shape} {arr.dtype}")
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.layers[name]
+        except KeyError:
+            raise KeyError(f"no layer named {name!r} in this layer set; have: {', '.join(self.layers)}") from None
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.layers)
+
+
+def check_layer(name: str, arr: object, shape: tuple[int, int]) -> np.ndarray:
+    """ValueError naming the layer unless ``arr`` is float32 of ``shape`` with every value in [0, 1]."""
+    if not isinstance(arr, np.ndarray) or arr.shape != shape or arr.dtype != np.float32:
+        got = f"{arr.shape} {arr.dtype}" if isinstance(arr, np.ndarray) else type(arr).__name__
+        raise ValueError(f"layer {name!r}: expected float32 array of shape {shape}, got {got}")
+    lo, hi = float(arr.min()), float(arr.max())
+    if not (lo >= 0.0 and hi <= 1.0):  # also catches NaN
+        raise ValueError(f"layer {name!r}: values must lie in [0, 1], got [{lo}, {hi}]")
+    return arr

@@ -1,0 +1,127 @@
+"""The layer registry: every layer, built-in or user-made, is one named function.
+
+A layer function takes ``(columns, voxel_map, context)`` and returns a float32 array of
+the columns' grid shape with values in [0, 1]. ``voxel_map`` is the ``VoxelMap`` the
+columns came from, or None when only columns are at hand. Register with
+``register_layer("name", fn)`` (or as a decorator); a behavior file then weights it by name
+and lists the module that registers it under ``plugins``. See docs/layers.md.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from layerpilot.layers import features
+from layerpilot.layers.layerset import LayerSet, check_layer
+from layerpilot.map.columns import ColumnLayers
+
+
+@dataclass(frozen=True)
+class LayerOptions:
+    """Tuning of the built-in layers (the ``[layers]`` table of a behavior file)."""
+
+    fringe_closing: int = 3  # cells; closing kernel that fills small unobserved holes (<= 1: none)
+    max_distance: float = 100.0  # metres; observations from farther count as unobserved
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.fringe_closing <= 51:
+            raise ValueError(f"fringe_closing = {self.fringe_closing} is out of range [0, 51]")
+        if not self.max_distance > 0:
+            raise ValueError(f"max_distance = {self.max_distance} must be > 0")
+
+
+@dataclass(frozen=True)
+class LayerContext:
+    """What a layer may know besides the map: the mission clock and where things are."""
+
+    now: float
+    home: tuple[float, float] = (0.0, 0.0)  # launch / operator point, map frame
+    position: tuple[float, float, float] | None = None  # the drone, if known
+    options: LayerOptions = LayerOptions()
+
+
+LayerFunction = Callable[[ColumnLayers, Any, LayerContext], np.ndarray]
+_REGISTRY: dict[str, LayerFunction] = {}
+RESERVED = frozenset({"color", "observed", "elevation_m"})
+
+
+def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool = False) -> Any:
+    """Add a layer under ``name``; usable as ``register_layer(name, fn)`` or ``@register_layer(name)``."""
+    if not name.isidentifier() or name in RESERVED:
+        raise ValueError(f"name: {name!r} must be a Python-identifier-like word and not one of {sorted(RESERVED)}")
+
+    def add(f: LayerFunction) -> LayerFunction:
+        if name in _REGISTRY and _REGISTRY[name] is not f and not replace:
+            raise ValueError(f"name: a layer {name!r} is already registered (pass replace=True to override)")
+        _REGISTRY[name] = f
+        return f
+
+    return add if fn is None else add(fn)
+
+
+def unregister_layer(name: str) -> None:
+    _REGISTRY.pop(name, None)
+
+
+def layer_names() -> list[str]:
+    return list(_REGISTRY)
+
+
+def load_plugins(plugins: Iterable[str], base: Path | None = None) -> None:
+    """Import modules that register layers: dotted module names, or .py paths (relative to ``base``)."""
+    for plugin in plugins:
+        if plugin.endswith(".py"):
+            path = Path(plugin)
+            if not path.is_absolute() and base is not None:
+                path = base / path
+            if not path.is_file():
+                raise ValueError(f"plugins: no such file {path}")
+            name = f"layerpilot_plugin_{path.stem}"
+            if sys.modules.get(name) is not None and getattr(sys.modules[name], "__file__", None) == str(path):
+                continue
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            spec.loader.exec_module(module)
+        else:
+            try:
+                importlib.import_module(plugin)
+            except ImportError as exc:
+                raise ValueError(f"plugins: cannot import {plugin!r}: {exc}") from None
+
+
+def compute_layers(
+    columns: ColumnLayers,
+    context: LayerContext,
+    names: Iterable[str] | None = None,
+    voxel_map: Any = None,
+) -> LayerSet:
+    """Compute the named layers (default: every registered one) into a checked LayerSet."""
+    names = layer_names() if names is None else list(dict.fromkeys(names))
+    unknown = [n for n in names if n not in _REGISTRY]
+    if unknown:
+        raise ValueError(f"names: no layer named {', '.join(map(repr, unknown))}; known: {', '.join(_REGISTRY)}")
+    shape = columns.geometry.shape
+    layers = {name: check_layer(name, _REGISTRY[name](columns, voxel_map, context), shape) for name in names}
+    return LayerSet(
+        columns.geometry,
+        layers,
+        columns.observed,
+        np.where(columns.observed, columns.elevation, np.float32(np.nan)).astype(np.float32, copy=False),
+        features.color(columns.observed, columns.color),
+        context.now,
+    )
+
+
+register_layer("fringe", lambda c, m, ctx: features.fringe(c.observed, ctx.options.fringe_closing))
+register_layer("time", lambda c, m, ctx: features.time_since_seen(c.observed, c.last_seen, ctx.now))
+register_layer("distance", lambda c, m, ctx: features.min_distance(c.observed, c.min_distance, ctx.options.max_distance))
+register_layer("elevation", lambda c, m, ctx: features.elevation(c.observed, c.elevation))
