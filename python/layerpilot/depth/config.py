@@ -17,7 +17,7 @@ class PickConfig:
     target_baseline_ratio: float = 0.06  # preferred among the usable partners
     max_rotation_deg: float = 15.0  # relative rotation between the two cameras
     epipole_margin: float = 0.1  # epipole must lie this fraction of the image size outside the image
-    min_sharpness: float = 20.0  # variance of the Laplacian of the grey image at matching scale
+    min_sharpness: float = 150.0  # variance of the Laplacian of the grey image at <= 320 px width
     ground_z: float = 0.0  # ground height for the altitude-based scene depth estimate
     max_depth: float = 100.0
 
@@ -45,6 +45,8 @@ class MatchConfig:
     speckle_window: int = 100  # pixels at matching scale
     speckle_range: int = 2  # disparity units (OpenCV multiplies by 16)
     lr_max_diff: float = 1.0  # left-right consistency tolerance in pixels
+    min_texture: float = 1.0  # grey-level standard deviation in the block around a pixel (0 = off)
+    max_disparity_step: float = 1.0  # drop pixels whose 3x3 neighbourhood spans more (0 = off)
     edge_margin: int = 8  # pixels dropped along the border of the valid rectified area
     max_depth: float = 100.0
     min_depth: float = 0.5
@@ -62,6 +64,8 @@ class MatchConfig:
         check_range("speckle_window", self.speckle_window, 0)
         check_range("speckle_range", self.speckle_range, 0)
         check_range("lr_max_diff", self.lr_max_diff, 0.0)
+        check_range("min_texture", self.min_texture, 0.0)
+        check_range("max_disparity_step", self.max_disparity_step, 0.0)
         check_range("edge_margin", self.edge_margin, 0)
         check_range("max_depth", self.max_depth, self.min_depth)
 
@@ -70,3 +74,18 @@ class MatchConfig:
 class DepthConfig:
     pick: PickConfig = field(default_factory=PickConfig)
     match: MatchConfig = field(default_factory=MatchConfig)
+
+
+# Measured presets (docs/depth.md): the disparity at the median scene depth is f * ratio, so the
+# smaller image needs a longer baseline ratio for the same relative depth error.
+PRESETS = {
+    640: DepthConfig(PickConfig(min_baseline_ratio=0.04, max_baseline_ratio=0.09, target_baseline_ratio=0.06),
+                     MatchConfig(scale=0.75, num_disparities=48, block_size=5, edge_margin=6)),
+    320: DepthConfig(PickConfig(min_baseline_ratio=0.06, max_baseline_ratio=0.12, target_baseline_ratio=0.09),
+                     MatchConfig(scale=1.0, num_disparities=48, block_size=3, min_texture=0.5, edge_margin=4)),
+}
+
+
+def preset_for(width: int) -> DepthConfig:
+    """The measured preset for the nearest image width."""
+    return PRESETS[min(PRESETS, key=lambda w: abs(w - width))]

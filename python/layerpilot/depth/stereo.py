@@ -63,6 +63,16 @@ class StereoMatcher:
         lr_ok = inside & (np.abs(right[rows, urc] - raw) <= c.lr_max_diff)
         rejected["left_right"] = int((keep & ~lr_ok).sum())
         keep = lr_ok
+        if c.min_texture > 0:
+            textured = keep & (_local_std(pair.left, c.block_size) >= c.min_texture)
+            rejected["texture"] = int((keep & ~textured).sum())
+            keep = textured
+        if c.max_disparity_step > 0:
+            d0 = np.where(keep, raw, 0).astype(np.float32)
+            k3 = np.ones((3, 3), np.uint8)
+            smooth = keep & (cv2.dilate(d0, k3) - cv2.erode(d0, k3) <= c.max_disparity_step)
+            rejected["discontinuity"] = int((keep & ~smooth).sum())
+            keep = smooth
         margin_ok = keep & _eroded(pair.left_valid, c.edge_margin) & _eroded(pair.right_valid, c.edge_margin)[rows, urc]
         rejected["edge_margin"] = int((keep & ~margin_ok).sum())
         keep = margin_ok
@@ -94,6 +104,12 @@ class StereoMatcher:
         px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
         py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
         return camera_points_to_cloud(ref, cam, ref.image[py, px], xy), disp
+
+
+def _local_std(image: np.ndarray, block: int) -> np.ndarray:
+    im = image.astype(np.float32)
+    mean = cv2.blur(im, (block, block))
+    return np.sqrt(np.maximum(cv2.blur(im * im, (block, block)) - mean * mean, 0.0))
 
 
 def _eroded(mask: np.ndarray, margin: int) -> np.ndarray:
