@@ -16,6 +16,11 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     p.add_argument("--status-every", type=float, default=5.0, help="seconds between JSON status lines on stdout")
     p.set_defaults(func=_map_server)
 
+    b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
+    b.add_argument("--seconds", type=float, default=5.0, help="seconds of clouds to send")
+    b.add_argument("--rate", type=float, default=10.0, help="clouds per second offered")
+    b.set_defaults(func=lambda a: __import__("layerpilot.nodes.bench", fromlist=["main"]).main(a.seconds, a.rate))
+
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then run with mode=client)")
     _bus_args(p)
     p.set_defaults(func=_router)

@@ -1,0 +1,100 @@
+"""`layerpilot bench bus`: the map server's layer-query round trip and cloud throughput on loopback.
+
+The reference for the query is a bare Zenoh queryable answering a payload of the same size
+from memory: the ratio says what the map (column extraction + encoding) adds to transport.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from layerpilot.bus import messages as msg
+from layerpilot.bus.keys import Keys
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.nodes.map_server import MapServer, MapServerConfig
+
+K = Keys("bench")
+
+
+def survey_cloud(i: int, width: int, height: int, speed: float, rate: float, rng: np.random.Generator) -> msg.Cloud:
+    """One depth frame's cloud: a 60-degree camera pitched 60 degrees down from 30 m over 0-8 m tall clutter."""
+    origin = np.array([i * speed / rate, 0.0, 30.0])
+    f = 0.5 * width / np.tan(np.radians(30))
+    u, v = np.meshgrid(np.arange(width) - width / 2 + 0.5, np.arange(height) - height / 2 + 0.5)
+    pitch = np.radians(60)
+    # camera x = right (-y world), y = down, z = forward tilted below the +x axis
+    fwd = np.array([np.cos(pitch), 0, -np.sin(pitch)])
+    down = np.array([-np.sin(pitch), 0, -np.cos(pitch)])
+    right = np.array([0, -1.0, 0])
+    d = (u.ravel()[:, None] * right + v.ravel()[:, None] * down + f * fwd) / f
+    ground = rng.uniform(0, 8, len(d))
+    t = (origin[2] - ground) / -d[:, 2]
+    pts = (origin + d * t[:, None]).astype(np.float32)
+    return msg.Cloud(i / rate, K.vehicle, i, pts, origin)
+
+
+def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int = 240, queries: int = 30,
+        window: int = 512, resolution: float = 0.5) -> dict:
+    ep = free_endpoint()
+    server_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
+    server = MapServer(server_session, MapServerConfig(resolution=resolution, snapshot="", layers_rate=0.01))
+    server.start()
+    rng = np.random.default_rng(0)
+    try:
+        time.sleep(0.5)
+        clouds = [msg.encode_cloud(survey_cloud(i, width, height, 5.0, rate, rng)) for i in range(int(seconds * rate))]
+        start = time.perf_counter()
+        for i, c in enumerate(clouds):  # paced like a camera
+            time.sleep(max(0.0, start + i / rate - time.perf_counter()))
+            client.put(K.cloud, c)
+        while server.counters.clouds_inserted + server.counters.clouds_dropped < len(clouds):
+            time.sleep(0.005)
+        elapsed = time.perf_counter() - start
+        c = server.counters
+
+        half = window * resolution / 2
+        selector = f"{K.service('layers')}?x={-half};y={-half};w={window};h={window}"
+        rtt, size = _round_trips(client, selector, queries)
+        payload = bytes(size)
+        ref = server_session.declare_queryable("bench/reference", lambda q: (q.reply(q.key_expr, payload), q.drop()))
+        time.sleep(0.3)
+        ref_rtt, _ = _round_trips(client, "bench/reference", queries)
+        ref.undeclare()
+    finally:
+        server.stop()
+        client.close()
+        server_session.close()
+    return {
+        "bench": "bus", "cloud_size": f"{width}x{height}", "points_per_cloud": width * height,
+        "clouds_offered_per_s": rate, "clouds_sent": len(clouds), "clouds_inserted": c.clouds_inserted,
+        "clouds_dropped": c.clouds_dropped, "clouds_inserted_per_s": round(c.clouds_inserted / elapsed, 2),
+        "keeps_up": c.clouds_dropped == 0,
+        "layer_window": f"{window}x{window}", "layer_set_bytes": size,
+        "layer_query_ms_median": round(1e3 * float(np.median(rtt)), 2),
+        "layer_query_ms_p95": round(1e3 * float(np.percentile(rtt, 95)), 2),
+        "reference_same_bytes_ms_median": round(1e3 * float(np.median(ref_rtt)), 2),
+        "ratio_vs_reference": round(float(np.median(rtt) / np.median(ref_rtt)), 2),
+    }
+
+
+def _round_trips(session, selector: str, n: int) -> tuple[list[float], int]:
+    times, size = [], 0
+    for _ in range(n):
+        t = time.perf_counter()
+        replies = list(session.get(selector, timeout=10.0))
+        times.append(time.perf_counter() - t)
+        if not replies or replies[0].ok is None:
+            raise RuntimeError(f"no answer to {selector}")
+        size = len(replies[0].ok.payload.to_bytes())
+    return times, size
+
+
+def main(seconds: float, rate: float) -> int:
+    result = run(seconds=seconds, rate=rate)
+    for k, v in result.items():
+        print(f"{k:>32}: {v}")
+    print(json.dumps(result))
+    return 0
