@@ -14,8 +14,10 @@ import sys
 
 COMMAND_MODULES = [
     "layerpilot.map.commands",
+    "layerpilot.depth.commands",
     "layerpilot.sim.commands",
     "layerpilot.nodes.commands",
+    "layerpilot.link.commands",
 ]
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 
@@ -86,9 +87,12 @@ class PointCloud:
         return len(self.points)
 
 
-def camera_points_to_cloud(frame: Frame, cam_points: np.ndarray, colors: np.ndarray,
-                           pixels: np.ndarray) -> PointCloud:
-    """Transform camera-frame points of ``frame`` to the map frame and wrap them as a cloud."""
-    points = (cam_points @ frame.rotation.T + frame.center).astype(np.float32)
+def camera_points_to_cloud(frame: Frame, cam_points: np.ndarray, colors: np.ndarray, pixels: np.ndarray,
+                           rotation: np.ndarray | None = None) -> PointCloud:
+    """Map-frame cloud from points in ``frame``'s camera (first rotated by ``rotation`` if given)."""
+    R = frame.rotation if rotation is None else frame.rotation @ rotation
+    affine = np.hstack([R, frame.center[:, None]]).astype(np.float32)
+    cam = np.ascontiguousarray(cam_points, np.float32).reshape(-1, 1, 3)
+    points = cv2.transform(cam, affine).reshape(-1, 3) if len(cam) else np.zeros((0, 3), np.float32)
     return PointCloud(points, np.ascontiguousarray(colors, np.uint8), frame.center.copy(), frame.stamp,
-                      pixels.astype(np.float32))
+                      np.asarray(pixels, np.float32))

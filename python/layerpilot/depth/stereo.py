@@ -97,13 +97,15 @@ class StereoMatcher:
         pair = disp.pair
         v, u = np.nonzero(np.isfinite(disp.depth))
         z = disp.depth[v, u]
-        canon = np.stack([(u - pair.cx) * z / pair.f, (v - pair.cy) * z / pair.f, z], axis=1)
-        cam = canon @ pair.to_camera.T
+        canon = np.empty((len(z), 3), np.float32)
+        canon[:, 0] = (u.astype(np.float32) - np.float32(pair.cx)) * z / np.float32(pair.f)
+        canon[:, 1] = (v.astype(np.float32) - np.float32(pair.cy)) * z / np.float32(pair.f)
+        canon[:, 2] = z
         xy = pair.source_xy[v, u]
         hh, ww = ref.image.shape[:2]
         px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
         py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
-        return camera_points_to_cloud(ref, cam, ref.image[py, px], xy), disp
+        return camera_points_to_cloud(ref, canon, ref.image[py, px], xy, pair.to_camera), disp
 
 
 def _local_std(image: np.ndarray, block: int) -> np.ndarray:
