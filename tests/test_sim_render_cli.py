@@ -51,3 +51,13 @@ def test_bench_sim_rejects_zero_frames(capsys):
 def test_sim_run_rejects_bad_rate(argv, capsys):
     assert main(argv + ["--url", "tcp:127.0.0.1:0", "--duration", "0.1"]) == 2
     assert "frame_rate_hz" in capsys.readouterr().err
+
+
+def test_sim_run_serves_mavlink_and_renders_for_the_given_mission_time(tmp_path, capsys):
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text("frame_rate_hz = 4.0\n[world]\nsize = 100.0\n[camera]\nwidth = 160\nheight = 120\n")
+    assert main(["sim", "--config", str(cfg), "--url", "tcp:127.0.0.1:0", "--duration", "1.0", "--speed", "4"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("layerpilot sim: world seed 0") and "tcp:127.0.0.1:0 -> 127.0.0.1:" in out[0]
+    assert "camera 160x120 at 4 Hz" in out[0]
+    assert out[-1] == "layerpilot sim: stopped at t=1.00 s after 5 frames"

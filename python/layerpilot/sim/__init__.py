@@ -1,19 +1,24 @@
 """Simulator: procedural forest world, rendered camera with ground-truth depth, scripted baselines.
 
 The vehicle dynamics and its MAVLink endpoint live in ``vehicle`` and
-``mavlink_vehicle``; rendering needs moderngl and is imported lazily.
+``mavlink_vehicle``; ``simulator`` ties world, camera and vehicle together.
+Rendering needs moderngl and is imported lazily. See docs/sim.md.
 """
 
 from layerpilot.sim.camera import CameraConfig, CameraPose, camera_pose, pixel_rays
 from layerpilot.sim.world import World, WorldConfig
 
 
-def __getattr__(name: str):
-    if name in ("Renderer", "Frame"):
-        from layerpilot.sim import render
+_LAZY = {"Renderer": "render", "Frame": "render", "Simulator": "simulator", "SimConfig": "simulator"}
 
-        return getattr(render, name)
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"layerpilot.sim.{_LAZY[name]}"), name)
     raise AttributeError(name)
 
 
-__all__ = ["CameraConfig", "CameraPose", "Frame", "Renderer", "World", "WorldConfig", "camera_pose", "pixel_rays"]
+__all__ = ["CameraConfig", "CameraPose", "Frame", "Renderer", "SimConfig", "Simulator", "World", "WorldConfig",
+           "camera_pose", "pixel_rays"]
