@@ -14,6 +14,7 @@ import sys
 
 COMMAND_MODULES = [
     "layerpilot.map.commands",
+    "layerpilot.layers.commands",
     "layerpilot.depth.commands",
     "layerpilot.sim.commands",
     "layerpilot.nodes.commands",
