@@ -30,12 +30,9 @@ def write_preview(out: Path, width: int = 640, height: int = 480, index: int = 0
         ref, other = render_pair(r, spec)
     cloud, disp = StereoMatcher(config.match).cloud(ref, other)
     s = score(cloud, ref, scale=config.match.scale)
-    estimated = np.full(ref.depth.shape, np.nan, np.float32)
     uv, z = ref.project(cloud.points.astype(np.float64))
-    px = np.clip(np.rint(uv).astype(int), 0, [ref.size[0] - 1, ref.size[1] - 1])
-    estimated[px[:, 1], px[:, 0]] = z
-    error = np.full(ref.depth.shape, np.nan, np.float32)
-    error[px[:, 1], px[:, 0]] = np.minimum(s.rel_errors, 1.0)
+    estimated = _on_matching_grid(uv, z, ref.depth.shape, config.match.scale)
+    error = _on_matching_grid(uv, np.minimum(s.rel_errors, 1.0), ref.depth.shape, config.match.scale)
     truth = np.where(ref.depth < 100.0, ref.depth, np.nan)
     vmax = float(np.nanmax(truth)) if np.isfinite(truth).any() else 100.0
     panels = [("left rectified (reference)", disp.pair.left, "gray", None),
@@ -59,3 +56,16 @@ def write_preview(out: Path, width: int = 640, height: int = 480, index: int = 0
     fig.savefig(out, dpi=80)
     plt.close(fig)
     return {"precision": s.precision, "coverage": s.coverage, "median_rel_error": s.median_rel_error}
+
+
+def _on_matching_grid(uv: np.ndarray, values: np.ndarray, shape: tuple[int, int], scale: float) -> np.ndarray:
+    """Per-point values drawn one cell per matching pixel, shown at full size (no dotted pattern)."""
+    import cv2
+
+    h, w = shape
+    gh, gw = max(1, round(h * scale)), max(1, round(w * scale))
+    grid = np.full((gh, gw), np.nan, np.float32)
+    gx = np.clip(((uv[:, 0] + 0.5) * scale).astype(int), 0, gw - 1)
+    gy = np.clip(((uv[:, 1] + 0.5) * scale).astype(int), 0, gh - 1)
+    grid[gy, gx] = values
+    return cv2.resize(grid, (w, h), interpolation=cv2.INTER_NEAREST)
