@@ -61,3 +61,14 @@ def test_sim_run_serves_mavlink_and_renders_for_the_given_mission_time(tmp_path,
     assert out[0].startswith("layerpilot sim: world seed 0") and "tcp:127.0.0.1:0 -> 127.0.0.1:" in out[0]
     assert "camera 160x120 at 4 Hz" in out[0]
     assert out[-1] == "layerpilot sim: stopped at t=1.00 s after 5 frames"
+
+
+def test_sim_run_reports_a_busy_port(capsys):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert main(["sim", "--url", f"tcp:127.0.0.1:{port}", "--duration", "0.1"]) == 2
+    assert f"tcp:127.0.0.1:{port}" in capsys.readouterr().err

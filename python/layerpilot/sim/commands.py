@@ -68,7 +68,11 @@ def _run(args: argparse.Namespace) -> None:
     from layerpilot.sim.simulator import Simulator
 
     config = _load(args)
-    with Simulator(config) as sim:
+    try:
+        sim = Simulator(config)
+    except OSError as exc:  # the MAVLink port is taken or the address is wrong
+        raise ValueError(str(exc)) from None
+    with sim:
         hosts = ", ".join(f"{u} -> {h}:{p}" for u, (h, p) in zip(config.urls, sim.endpoint.addresses))
         s = sim.world.stats()
         print(f"layerpilot sim: world seed {config.world.seed} ({s['trees']} trees), MAVLink on {hosts}, "
