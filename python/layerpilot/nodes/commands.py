@@ -1,4 +1,4 @@
-"""Node processes: `layerpilot map-server`, `layerpilot router`."""
+"""Node processes: `layerpilot map-server`, `decide`, `router`; `layerpilot bench bus`."""
 
 from __future__ import annotations
 
@@ -15,6 +15,12 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     p.add_argument("--resolution", type=float, help="voxel size in metres")
     p.add_argument("--status-every", type=float, default=5.0, help="seconds between JSON status lines on stdout")
     p.set_defaults(func=_map_server)
+
+    p = commands.add_parser("decide", help="the decision node of one vehicle: layers + pose in, waypoints out")
+    _bus_args(p)
+    p.add_argument("--vehicle", default="uav1", help="vehicle name (key chunk)")
+    p.add_argument("--behavior", help="behavior preset or .toml (default: the mission's, else balanced)")
+    p.set_defaults(func=_decide)
 
     b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
     b.add_argument("--seconds", type=float, default=5.0, help="seconds of clouds to send")
@@ -49,6 +55,26 @@ def _map_server(args: argparse.Namespace) -> int:
         _status(server)
     server.stop()
     _status(server)
+    session.close()
+    return 0
+
+
+def _decide(args: argparse.Namespace) -> int:
+    from layerpilot.bus.session import open_session
+    from layerpilot.nodes.decide import DecideConfig, DecideNode
+    from layerpilot.nodes.runner import bus_config, load_tables, stop_event, table
+
+    tables = load_tables(args.config)
+    cfg = table(DecideConfig, tables, "decide", {"behavior": args.behavior})
+    stop = stop_event()
+    session = open_session(bus_config(tables, args.endpoint))
+    node = DecideNode(session, args.vehicle, cfg)
+    node.start()
+    print(json.dumps({"node": "decide", "vehicle": args.vehicle, "status": "ready"}), flush=True)
+    stop.wait()
+    node.stop()
+    print(json.dumps({"node": "decide", "vehicle": args.vehicle, "decisions": node.seq, "reached": node.reached,
+                      "rejected": node.rejects.total}), flush=True)
     session.close()
     return 0
 

@@ -40,7 +40,7 @@ class MapServerConfig:
     resolution: float = 0.5
     layers_rate: float = 1.0  # Hz
     window: tuple[float, float, int, int] = (-64.0, -64.0, 256, 256)  # published: x, y (south-west, m), w, h (cells)
-    layers: tuple[str, ...] = ("observed", "elevation", "last_seen", "min_distance")
+    layers: tuple[str, ...] = ("observed", "elevation", "color", "last_seen", "min_distance")  # what decide needs
     snapshot: str = "runs/map.ot"  # "" = no snapshots
     snapshot_period: float = 30.0  # s
     queue_size: int = 8

@@ -1,0 +1,93 @@
+"""The decide node on real Zenoh: layer set + pose in, waypoint with explanation out; avoids the other drone."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from layerpilot.bus import messages as msg
+from layerpilot.bus.keys import Keys
+from layerpilot.bus.layerset import LayerSet, column_arrays, encode_layer_set
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.map import VoxelMap
+from layerpilot.nodes.decide import DecideConfig, DecideNode
+
+
+def wait_for(cond, what: str, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def layer_payload(vehicle: str) -> bytes:
+    """A 40 m x 40 m patch of ground around home seen at t = 1 s, in a 256 m window."""
+    m = VoxelMap(1.0)
+    xs, ys = np.meshgrid(np.arange(-20, 20.0) + 0.5, np.arange(-20, 20.0) + 0.5)
+    pts = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1).astype(np.float32)
+    m.insert(pts, np.array([0.0, 0.0, 30.0]), stamp=1.0)
+    cl = m.column_layers(-128, -128, 256, 256)
+    return encode_layer_set(LayerSet(1.0, vehicle, cl.geometry, column_arrays(cl)))
+
+
+@pytest.fixture
+def sessions():
+    ep = free_endpoint()
+    ss = [open_session(BusConfig(endpoint=ep)) for _ in range(2)]
+    yield ss
+    for s in ss:
+        s.close()
+
+
+def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
+    node_session, world = sessions
+    nodes = [DecideNode(node_session, v, DecideConfig()) for v in ("uav1", "uav2")]
+    got: dict[str, list[msg.Waypoint]] = {"uav1": [], "uav2": []}
+    decisions: list[msg.Decision] = []
+    subs = [world.declare_subscriber(Keys(v).waypoint, lambda s, v=v: got[v].append(msg.decode_waypoint(s.payload.to_bytes())))
+            for v in got]
+    subs.append(world.declare_subscriber("layerpilot/*/decision",
+                                         lambda s: decisions.append(msg.decode_decision(s.payload.to_bytes()))))
+    for n in nodes:
+        n.start()
+    try:
+        time.sleep(0.5)
+        k1, k2 = Keys("uav1"), Keys("uav2")
+        world.put(k1.layers, layer_payload("uav1"))
+        world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", np.array([0.0, 0.0, 50.0]))))
+        wait_for(lambda: len(got["uav1"]) == 1, "uav1's first waypoint")
+        w1 = got["uav1"][0]
+        assert w1.seq == 1 and w1.position[2] == 50.0
+        assert 10.0 <= np.hypot(*w1.position[:2]) <= 100.0  # outside r_e, inside the area of interest
+        d1 = decisions[0]
+        names = [t.name for t in d1.terms]
+        assert {"fringe", "time", "distance", "zone", "preference", "history"} <= set(names)
+        assert d1.score > 0 and d1.behavior == "balanced"
+
+        # same map, same place, same behavior: uav2 would pick uav1's cell, but must stay r_e away
+        wait_for(lambda: "uav1" in nodes[1]._others, "uav2 hearing uav1's target")
+        world.put(k2.layers, layer_payload("uav2"))
+        world.put(k2.pose, msg.encode_state(msg.State(2.0, "uav2", np.array([0.0, 0.0, 50.0]))))
+        wait_for(lambda: len(got["uav2"]) == 1, "uav2's first waypoint")
+        assert np.hypot(*(got["uav2"][0].position[:2] - w1.position[:2])) >= 10.0
+
+        # no new decision while flying; a new one on arrival
+        world.put(k1.pose, msg.encode_state(msg.State(3.0, "uav1", w1.position * [0.5, 0.5, 1])))
+        time.sleep(0.5)
+        assert len(got["uav1"]) == 1
+        world.put(k1.pose, msg.encode_state(msg.State(9.0, "uav1", w1.position + [1.0, 0, 0])))
+        wait_for(lambda: len(got["uav1"]) == 2, "uav1's second waypoint")
+        assert got["uav1"][1].seq == 2 and nodes[0].reached == 1
+        assert nodes[0].distance_flown > np.hypot(*w1.position[:2])
+
+        world.put(k1.layers, b"\x08\x01garbage")
+        world.put(k1.pose, b"\xff" * 10)
+        wait_for(lambda: nodes[0].rejects.total == 2, "both bad messages rejected")
+    finally:
+        for n in nodes:
+            n.stop()
+        for s in subs:
+            s.undeclare()
