@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from layerpilot.depth import Frame, GroundTruthDepth, MatchConfig, StereoMatcher, rectify
+from layerpilot.depth import Frame, GroundTruthDepth, MatchConfig, StereoDepth, StereoMatcher, make_source, rectify
 from layerpilot.depth.evaluate import score
 from layerpilot.depth.synthetic import intrinsics, look_pose, noise_texture, plane_frame
 
@@ -103,3 +103,10 @@ def test_ground_truth_source_backprojects_exactly(texture):
     s = score(cloud, ref)
     assert s.precision == 1.0 and s.coverage == 1.0
     assert GroundTruthDepth().push(Frame(ref.image, ref.pose, ref.K, 0.0)) is None
+
+
+def test_make_source_by_name():
+    assert isinstance(make_source("stereo"), StereoDepth)
+    assert isinstance(make_source("ground_truth"), GroundTruthDepth)
+    with pytest.raises(ValueError, match="kind"):
+        make_source("lidar")

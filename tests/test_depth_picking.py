@@ -102,3 +102,10 @@ def test_scene_depth_from_a_callback_and_history_length():
 def test_config_errors_name_the_key():
     with pytest.raises(ValueError, match="max_baseline_ratio"):
         PickConfig(min_baseline_ratio=0.1, max_baseline_ratio=0.05)
+
+
+def test_partner_of_another_image_size_is_not_used():
+    p = picker()
+    small = cv2.resize(IMAGE, (80, 60), interpolation=cv2.INTER_AREA)
+    p.push(Frame(small, look_pose(np.array([0.0, 0.0, 40.0]), 90.0, 90.0), intrinsics(80, 60), 0.0))
+    assert p.push(frame(x=2.0)).reason == "size_mismatch"

@@ -9,10 +9,10 @@ from layerpilot.depth.config import DepthConfig, MatchConfig, PickConfig
 from layerpilot.depth.frames import Frame, PointCloud
 from layerpilot.depth.picking import FramePicker, PickResult
 from layerpilot.depth.rectify import RectifiedPair, rectify
-from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth
+from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth, make_source
 from layerpilot.depth.stereo import StereoMatcher
 
 __all__ = [
     "DepthConfig", "MatchConfig", "PickConfig", "Frame", "PointCloud", "FramePicker", "PickResult",
-    "RectifiedPair", "rectify", "DepthSource", "GroundTruthDepth", "StereoDepth", "StereoMatcher",
+    "RectifiedPair", "rectify", "DepthSource", "GroundTruthDepth", "StereoDepth", "StereoMatcher", "make_source",
 ]

@@ -1,6 +1,7 @@
 """Frame picking: which earlier frame makes a usable stereo pair with the newest one.
 
 Rule (also in docs/depth.md): a partner from the recent history is usable when
+  0. both have the same image size,
   1. both are sharp: variance of the Laplacian >= ``min_sharpness`` (blurry frames are
      skipped on arrival and never enter the history),
   2. baseline / median scene depth lies in [min_baseline_ratio, max_baseline_ratio],
@@ -25,7 +26,7 @@ import numpy as np
 from layerpilot.depth.config import PickConfig
 from layerpilot.depth.frames import Frame
 
-REASONS = ("blurry", "no_history", "baseline_short", "baseline_long", "rotation",
+REASONS = ("blurry", "no_history", "size_mismatch", "baseline_short", "baseline_long", "rotation",
            "epipole_inside")
 
 
@@ -111,6 +112,8 @@ class FramePicker:
     def _check(self, frame: Frame, cand: Frame, depth: float) -> tuple[int, str, float]:
         cfg = self.config
         ratio = float(np.linalg.norm(frame.center - cand.center)) / depth
+        if cand.size != frame.size:
+            return 0, "size_mismatch", ratio
         if ratio < cfg.min_baseline_ratio:
             return 1, "baseline_short", ratio
         if ratio > cfg.max_baseline_ratio:

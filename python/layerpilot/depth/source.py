@@ -71,3 +71,13 @@ class GroundTruthDepth:
 
     def stats(self) -> dict[str, int]:
         return {"frames": self.frames, "skipped_no_depth": self.skipped_no_depth}
+
+
+def make_source(kind: str, config: DepthConfig = DepthConfig(),
+                scene_depth: Callable[[Frame], float] | None = None) -> DepthSource:
+    """The node's depth source by name: ``"stereo"`` or ``"ground_truth"``."""
+    if kind == "stereo":
+        return StereoDepth(config, scene_depth)
+    if kind == "ground_truth":
+        return GroundTruthDepth(config.match.max_depth)
+    raise ValueError(f"kind: expected 'stereo' or 'ground_truth', got {kind!r}")

@@ -83,6 +83,10 @@ class StereoMatcher:
         disparity = np.where(range_ok, raw, np.nan).astype(np.float32)
         return Disparity(pair, disparity, np.where(range_ok, depth, np.nan).astype(np.float32), rejected)
 
+    def sgbm_only(self, pair: RectifiedPair) -> np.ndarray:
+        """One bare OpenCV SGBM call on a rectified pair (the speed reference of the bench)."""
+        return self._sgbm.compute(pair.left, pair.right)
+
     def _match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """SGBM disparity in pixels; both images are padded on the left so that SGBM's blind
         band (the first ``num_disparities`` columns) falls outside the image."""
