@@ -288,3 +288,15 @@ def test_bad_arguments():
         EndpointConfig(flavour="inav")
     with pytest.raises(ValueError, match="lat"):
         GeoOrigin(lat=95.0)
+
+
+def test_hold_brakes_to_the_stopping_point_without_coming_back():
+    v = airborne()
+    v.set_velocity_target(10.0, 0.0, 0.0)
+    fly(v, 4.0)
+    x0 = v.position[0]
+    v.hold()
+    rows = fly(v, 8.0)
+    assert np.all(np.diff(rows[:, 1]) >= -1e-9)              # never reverses
+    assert v.position[0] - x0 == pytest.approx(10.0 ** 2 / (2 * 4.0 * 0.8), abs=0.3)
+    assert np.linalg.norm(v.velocity) < 0.01

@@ -33,3 +33,17 @@ def yaw_enu_to_ned(yaw_enu: float) -> float:
 def yaw_ned_to_enu(yaw_ned: float) -> float:
     """NED yaw (CW from north) -> ENU yaw (CCW from east), wrapped to [-pi, pi)."""
     return wrap_pi(math.pi / 2.0 - yaw_ned)
+
+
+def attitude_ned_to_enu(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
+    """Euler angles of body FRD in NED -> body FLU in ENU (the ROS/REP-103 convention).
+
+    Roll keeps its sign, pitch flips (nose-up is positive in FRD/NED and negative about
+    FLU's left-pointing y axis), yaw becomes counter-clockwise from east.
+    """
+    return float(roll), -float(pitch), yaw_ned_to_enu(yaw)
+
+
+def attitude_enu_to_ned(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
+    """Inverse of :func:`attitude_ned_to_enu`."""
+    return float(roll), -float(pitch), yaw_enu_to_ned(yaw)

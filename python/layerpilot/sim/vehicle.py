@@ -17,6 +17,7 @@ import numpy as np
 from layerpilot.config import check_range
 
 GRAVITY = 9.80665
+BRAKING = 0.8  # fraction of max_accel planned for braking, the rest is margin for the controller
 
 
 @dataclass(frozen=True)
@@ -93,8 +94,11 @@ class Multicopter:
         self._target.yaw, self._target.yaw_rate = yaw, (None if yaw is not None else yaw_rate)
 
     def hold(self) -> None:
-        """Stop where the vehicle is now (it decelerates within the acceleration limit)."""
-        self._target = _Target(position=self.position.copy())
+        """Brake and hold at the stopping point (where the acceleration limit lets it stop), like a loiter."""
+        speed = float(np.linalg.norm(self.velocity))
+        stop = self.position + self.velocity * speed / (2.0 * self.limits.max_accel * BRAKING)
+        stop[2] = max(stop[2], self.ground_z)
+        self._target = _Target(position=stop)
 
     @property
     def position_target(self) -> np.ndarray | None:
@@ -150,7 +154,7 @@ class Multicopter:
             for axes in (slice(0, 2), slice(2, 3)):
                 dist = float(np.linalg.norm(error[axes]))
                 speed = float(np.linalg.norm(desired[axes]))
-                stop_speed = math.sqrt(2.0 * lim.max_accel * 0.8 * dist)
+                stop_speed = math.sqrt(2.0 * lim.max_accel * BRAKING * dist)
                 if speed > stop_speed:
                     desired[axes] *= stop_speed / speed
         horizontal = float(np.hypot(desired[0], desired[1]))

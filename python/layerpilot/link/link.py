@@ -1,0 +1,590 @@
+"""FlightLink: fly layerpilot's map-frame waypoints on ArduPilot (GUIDED) or PX4 (OFFBOARD).
+
+One background thread owns the receive side: it tracks the autopilot's state,
+sends our 1 Hz HEARTBEAT (as an onboard controller), re-sends the current
+setpoint every ``setpoint_period_s`` and watches the failsafes. The public
+methods are called from the mission thread and block with wall-clock timeouts.
+
+Failsafes:
+  * no autopilot HEARTBEAT for ``heartbeat_timeout_s`` -> link lost: setpoints stop,
+    new waypoints raise :class:`LinkLost`, a running :meth:`goto` waits; when the
+    link returns it resumes (or commands RTL/LAND if the loss lasted longer than
+    ``long_loss_s`` and ``long_loss_action`` says so);
+  * a waypoint outside ``area`` or the altitude limits raises :class:`WaypointRefused`
+    before anything is sent;
+  * a rejected COMMAND_ACK raises :class:`CommandRejected` naming the MAV_RESULT
+    (and is reported even when nobody waits for it);
+  * a mode change away from GUIDED/OFFBOARD made by someone else pauses the link
+    until that mode is handed back.
+Every report goes to ``events`` (a list of strings), the ``on_event`` callback and
+the ``layerpilot.link`` logger.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from layerpilot.link import modes
+from layerpilot.link.config import LinkConfig
+from layerpilot.link.connection import open_connection
+from layerpilot.link.frames import attitude_ned_to_enu, enu_to_ned, ned_to_enu, yaw_enu_to_ned
+from layerpilot.link.telemetry import Telemetry
+
+log = logging.getLogger("layerpilot.link")
+
+POSITION_ONLY = 0b110111111000      # x, y, z used; velocity, acceleration, yaw, yaw rate ignored
+POSITION_AND_YAW = 0b100111111000   # as above plus yaw
+POSITION_FRESH_S = 2.0              # a position estimate older than this does not count
+
+
+class LinkError(RuntimeError):
+    """The flight link could not do what was asked; the message says why."""
+
+
+class LinkLost(LinkError):
+    """No HEARTBEAT from the autopilot within the timeout."""
+
+
+class NotReady(LinkError):
+    """The vehicle did not become ready in time; ``missing`` lists what was still missing."""
+
+    def __init__(self, message: str, missing: list[str]) -> None:
+        super().__init__(message)
+        self.missing = missing
+
+
+class CommandRejected(LinkError):
+    """The autopilot answered a command with something other than MAV_RESULT_ACCEPTED."""
+
+    def __init__(self, command: int, result: int, detail: str = "") -> None:
+        self.command, self.result = command, result
+        self.result_name = modes.result_name(result)
+        super().__init__(f"{modes.command_name(command)} rejected: {self.result_name}{detail}")
+
+
+class WaypointRefused(LinkError, ValueError):
+    """A waypoint outside the area of interest or the altitude limits; nothing was sent."""
+
+
+class FlightLink:
+    """A companion-computer MAVLink link to one autopilot. Use as a context manager or call close()."""
+
+    def __init__(self, config: LinkConfig | None = None, clock: Callable[[], float] = time.monotonic,
+                 on_event: Callable[[str], None] | None = None) -> None:
+        self.config = config if config is not None else LinkConfig()
+        self.clock = clock
+        self.on_event = on_event
+        self.events: list[str] = []
+        self._conn = open_connection(self.config.url, self.config.source_system, self.config.source_component,
+                                     self.config.baud)
+        self._send_lock = threading.Lock()
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        # autopilot state (guarded by _cond)
+        self.flavour: str | None = None
+        self.target_system = self.config.target_system
+        self.target_component = self.config.target_component
+        self._last_heartbeat = -math.inf
+        self._link_ok = False
+        self._lost_at = 0.0
+        self._armed = False
+        self._mode = ""
+        self._prearm_ok = False
+        self._unhealthy: list[str] = []
+        self._gps_fix = -1
+        self._position_at = -math.inf
+        self._pose_time = 0.0
+        self._position = np.zeros(3)
+        self._velocity = np.zeros(3)
+        self._attitude = (0.0, 0.0, 0.0)
+        self._home: np.ndarray | None = None
+        self._battery = (0.0, -1)
+        self._acks: dict[int, int] = {}
+        self._waited: set[int] = set()
+        self._texts: list[str] = []
+        # control state
+        self._in_control = False    # we put the vehicle in GUIDED/OFFBOARD and fly it
+        self._paused = False        # the pilot took over
+        self._setpoint: tuple[np.ndarray, float | None, tuple[float, float] | None, bool] | None = None
+        self._stream_hold = False   # PX4: stream the current position (pre-arm, takeoff prep, pause)
+        self._long_loss_command: int | None = None
+        self._thread = threading.Thread(target=self._loop, name="flight-link", daemon=True)
+        self._thread.start()
+
+    # --- lifecycle -------------------------------------------------------------------
+    def connect(self, timeout: float | None = None) -> str:
+        """Wait for an ArduPilot/PX4 HEARTBEAT, ask for telemetry streams; returns the autopilot flavour."""
+        timeout = self.config.connect_timeout_s if timeout is None else timeout
+        if not self._wait(lambda: self._link_ok, timeout):
+            raise LinkLost(f"no ArduPilot/PX4 HEARTBEAT on {self.config.url} within {timeout:.1f} s")
+        self._request_streams()
+        return self.flavour
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._conn.close()
+
+    def __enter__(self) -> FlightLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- state -----------------------------------------------------------------------
+    @property
+    def link_ok(self) -> bool:
+        return self._link_ok
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    @property
+    def armed(self) -> bool:
+        return self._armed
+
+    def telemetry(self) -> Telemetry:
+        with self._cond:
+            roll, pitch, yaw = self._attitude
+            return Telemetry(self._pose_time, self._position.copy(), self._velocity.copy(), roll, pitch, yaw,
+                             self._armed, self._mode, self.flavour or "", self._battery[0], self._battery[1],
+                             self._link_ok, time.monotonic() - self._last_heartbeat,
+                             None if self._home is None else self._home.copy(), self._paused)
+
+    def missing(self) -> list[str]:
+        """What still keeps the vehicle from being ready to fly (empty when ready)."""
+        out = []
+        if not self._link_ok:
+            out.append("autopilot HEARTBEAT")
+        if not self._prearm_ok:
+            out.append("pre-arm checks (SYS_STATUS)" + (f": unhealthy {', '.join(self._unhealthy)}"
+                                                         if self._unhealthy else ""))
+        if self._gps_fix != -1 and self._gps_fix < mav.GPS_FIX_TYPE_3D_FIX:
+            out.append(f"GPS 3D fix (fix_type {self._gps_fix})")
+        if time.monotonic() - self._position_at > POSITION_FRESH_S:
+            out.append("position estimate (LOCAL_POSITION_NED)")
+        if self._home is None:
+            out.append("home position (HOME_POSITION)")
+        return out
+
+    def wait_ready(self, timeout: float | None = None) -> None:
+        """Block until pre-arm checks pass and a position estimate and home arrive; NotReady names what is missing."""
+        timeout = self.config.ready_timeout_s if timeout is None else timeout
+        deadline = time.monotonic() + timeout
+        next_home_request = 0.0
+        while self.missing():
+            if time.monotonic() >= deadline:
+                missing = self.missing()
+                texts = [t for t in self._texts[-5:] if "arm" in t.lower() or "fail" in t.lower()]
+                raise NotReady(f"vehicle not ready after {timeout:.1f} s; missing: {'; '.join(missing)}"
+                               + (f"; autopilot says: {' | '.join(texts)}" if texts else ""), missing)
+            if self._home is None and self._link_ok and time.monotonic() >= next_home_request:
+                self._command_long(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
+                next_home_request = time.monotonic() + 1.0
+            self._wait(lambda: False, 0.1)
+
+    # --- flying ----------------------------------------------------------------------
+    def set_mode(self, name: str) -> None:
+        """Command flight mode ``name`` (ArduCopter or PX4 name) and wait until the HEARTBEAT shows it."""
+        self._require_link()
+        custom = modes.custom_mode_of(self.flavour, name)
+        if self.flavour == modes.PX4:
+            main, sub = (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
+            self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
+        else:
+            self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom)
+        if not self._wait(lambda: self._mode == name, self.config.mode_timeout_s):
+            raise LinkError(f"mode {name} accepted but the HEARTBEAT still says {self._mode}")
+
+    def start_guided(self) -> None:
+        """Take control: GUIDED on ArduPilot; on PX4 stream setpoints for ``offboard_prestream_s`` then OFFBOARD."""
+        self._require_link()
+        guided = modes.GUIDED_MODE[self.flavour]
+        if self.flavour == modes.PX4:
+            with self._cond:
+                self._stream_hold = True
+            self._wait(lambda: False, self.config.offboard_prestream_s)
+        self._in_control, self._paused = True, False
+        if self._mode != guided:
+            try:
+                self.set_mode(guided)
+            except LinkError:
+                self._in_control = False
+                raise
+
+    def arm(self, timeout: float | None = None) -> None:
+        """Arm, retrying while the autopilot refuses (e.g. pre-arm checks still settling) until ``timeout``."""
+        timeout = self.config.arm_timeout_s if timeout is None else timeout
+        deadline = time.monotonic() + timeout
+        while not self._armed:
+            try:
+                self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            except CommandRejected as exc:
+                if time.monotonic() >= deadline:
+                    texts = [t for t in self._texts[-3:]]
+                    raise CommandRejected(exc.command, exc.result,
+                                          f" (gave up after {timeout:.1f} s; autopilot says: {' | '.join(texts)})")
+                self._wait(lambda: False, min(1.0, max(0.0, deadline - time.monotonic())))
+                continue
+            if not self._wait(lambda: self._armed, self.config.mode_timeout_s):
+                raise LinkError("arming accepted but the HEARTBEAT does not show the vehicle armed")
+
+    def takeoff(self, altitude: float, timeout: float | None = None) -> None:
+        """Climb to ``altitude`` metres above home and hold there (NAV_TAKEOFF; PX4: an OFFBOARD setpoint)."""
+        self._require_link()
+        if not self._armed:
+            raise LinkError("takeoff: the vehicle is not armed")
+        home = self._home_or_error()
+        check = self._check_waypoint(self._position[0], self._position[1], home[2] + altitude)
+        if self.flavour == modes.ARDUPILOT:
+            self.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, altitude)
+            target = check
+            timeout = timeout if timeout is not None else 30.0 + 2.0 * altitude
+            if not self._wait_arrival(target, timeout, use_setpoint=False):
+                raise LinkError(f"takeoff: did not reach {altitude:.1f} m within {timeout:.1f} s")
+            self._set_setpoint(target, None, None, False)
+        else:
+            self.goto(*check, timeout=timeout)
+
+    def set_waypoint(self, x: float, y: float, z: float, yaw: float | None = None,
+                     look_at: tuple[float, float] | None = None, face_waypoint: bool = False) -> np.ndarray:
+        """Start flying to map-frame (x, y, z) without waiting; the worker re-sends it. Returns the waypoint.
+
+        ``yaw`` (ENU radians), ``look_at`` (a map point to face, e.g. an orbit centre) or
+        ``face_waypoint`` choose the heading; by default the autopilot keeps its own.
+        """
+        target = self._check_waypoint(x, y, z)
+        self._require_link()
+        if self._paused:
+            raise LinkError(f"paused: the pilot has the vehicle in {self._mode}; hand back "
+                            f"{modes.GUIDED_MODE[self.flavour]} to continue")
+        if not self._in_control:
+            raise LinkError("not in control: call start_guided() first")
+        self._set_setpoint(target, yaw, look_at, face_waypoint)
+        return target
+
+    def goto(self, x: float, y: float, z: float, yaw: float | None = None,
+             look_at: tuple[float, float] | None = None, face_waypoint: bool = False,
+             timeout: float | None = None) -> None:
+        """Fly to map-frame (x, y, z) and return once within the tolerance for ``arrival_hold_s``.
+
+        Waits out link losses and pilot pauses (they do not count as arrival); raises
+        LinkLost when the link came back after a long loss and the configured action was taken.
+        """
+        target = self.set_waypoint(x, y, z, yaw, look_at, face_waypoint)
+        if timeout is None:
+            timeout = 60.0 + 3.0 * float(np.linalg.norm(target - self._position))
+        if not self._wait_arrival(target, timeout, use_setpoint=True):
+            raise LinkError(f"goto: did not arrive at ({x:.1f}, {y:.1f}, {z:.1f}) within {timeout:.1f} s "
+                            f"(now at {np.round(self._position, 1).tolist()})")
+
+    def land(self, wait: bool = True, timeout: float = 180.0) -> None:
+        """Land where the vehicle is (NAV_LAND); with ``wait``, until it has disarmed."""
+        self._release(mav.MAV_CMD_NAV_LAND, "LAND", wait, timeout)
+
+    def rtl(self, wait: bool = True, timeout: float = 300.0) -> None:
+        """Return to launch and land (NAV_RETURN_TO_LAUNCH); with ``wait``, until it has disarmed."""
+        self._release(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, "RTL", wait, timeout)
+
+    def command(self, command: int, *params: float) -> None:
+        """Send COMMAND_LONG and wait for its ACK; CommandRejected unless MAV_RESULT_ACCEPTED."""
+        self._require_link()
+        result = self._command_ack(command, params)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise CommandRejected(command, result)
+
+    # --- internals: commands ---------------------------------------------------------
+    def _release(self, command: int, what: str, wait: bool, timeout: float) -> None:
+        with self._cond:
+            self._in_control, self._paused, self._setpoint, self._stream_hold = False, False, None, False
+        self.command(command)
+        if wait and not self._wait(lambda: not self._armed, timeout):
+            raise LinkError(f"{what}: still armed after {timeout:.1f} s")
+
+    def _command_ack(self, command: int, params: tuple[float, ...]) -> int:
+        with self._cond:
+            self._waited.add(command)
+            self._acks.pop(command, None)
+        try:
+            for attempt in range(self.config.command_retries + 1):
+                self._command_long(command, *params, confirmation=attempt)
+                if self._wait(lambda: command in self._acks and self._acks[command] != mav.MAV_RESULT_IN_PROGRESS,
+                              self.config.command_timeout_s):
+                    result = self._acks[command]
+                    if result != mav.MAV_RESULT_ACCEPTED:
+                        self._report(f"{modes.command_name(command)} rejected: {modes.result_name(result)}")
+                    return result
+                if not self._link_ok:
+                    raise LinkLost(f"{modes.command_name(command)}: link lost while waiting for COMMAND_ACK")
+            raise LinkError(f"{modes.command_name(command)}: no COMMAND_ACK after "
+                            f"{self.config.command_retries + 1} tries")
+        finally:
+            with self._cond:
+                self._waited.discard(command)
+
+    def _command_long(self, command: int, *params: float, confirmation: int = 0) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        with self._send_lock:
+            self._conn.mav.command_long_send(self.target_system, self.target_component, command, confirmation, *p)
+
+    def _request_streams(self) -> None:
+        """Ask for the streams the link needs (ACKs checked by the worker: refusals are reported)."""
+        fast = 1e6 / self.config.telemetry_rate_hz
+        for msg_id, interval in ((mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, fast), (mav.MAVLINK_MSG_ID_ATTITUDE, fast),
+                                 (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, fast), (mav.MAVLINK_MSG_ID_SYS_STATUS, 1e6),
+                                 (mav.MAVLINK_MSG_ID_HOME_POSITION, 5e6)):
+            self._command_long(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval)
+
+    # --- internals: waypoints --------------------------------------------------------
+    def _home_or_error(self) -> np.ndarray:
+        if self._home is None:
+            raise LinkError("home position unknown (no HOME_POSITION yet): call wait_ready() first")
+        return self._home
+
+    def _check_waypoint(self, x: float, y: float, z: float) -> np.ndarray:
+        target = np.array([x, y, z], dtype=np.float64)
+        if not np.all(np.isfinite(target)):
+            raise WaypointRefused(f"waypoint: must be finite, got {target.tolist()}")
+        area = self.config.area
+        if area is not None and not (area[0] <= x <= area[2] and area[1] <= y <= area[3]):
+            raise WaypointRefused(f"waypoint ({x:.1f}, {y:.1f}) is outside the area of interest "
+                                  f"x [{area[0]}, {area[2]}], y [{area[1]}, {area[3]}]; not sent")
+        height = z - self._home_or_error()[2]
+        if not self.config.alt_min_m <= height <= self.config.alt_max_m:
+            raise WaypointRefused(f"waypoint altitude {height:.1f} m above home is outside the limits "
+                                  f"[{self.config.alt_min_m}, {self.config.alt_max_m}] m; not sent")
+        return target
+
+    def _set_setpoint(self, target: np.ndarray, yaw: float | None, look_at: tuple[float, float] | None,
+                      face: bool) -> None:
+        with self._cond:
+            self._setpoint = (target, yaw, look_at, face)
+            self._stream_hold = False
+        self._send_setpoint()
+
+    def _wait_arrival(self, target: np.ndarray, timeout: float, use_setpoint: bool) -> bool:
+        """True once within tolerance for arrival_hold_s with the link up and not paused."""
+        deadline = time.monotonic() + timeout
+        since: float | None = None
+        while time.monotonic() < deadline:
+            if self._stop.is_set():
+                raise LinkError("link closed")
+            if use_setpoint and self._setpoint is None and self._in_control is False:
+                raise LinkLost("waypoint abandoned: the link commanded "
+                               f"{self.config.long_loss_action.upper()} after a long link loss")
+            fresh = time.monotonic() - self._position_at < POSITION_FRESH_S
+            close = np.linalg.norm(self._position - target) <= self.config.arrival_tolerance_m
+            if self._link_ok and fresh and close and not self._paused:
+                since = time.monotonic() if since is None else since
+                if time.monotonic() - since >= self.config.arrival_hold_s:
+                    return True
+            else:
+                since = None
+            self._wait(lambda: False, 0.05)
+        return False
+
+    def _send_setpoint(self) -> None:
+        """Send the current setpoint now if the failsafes allow it (worker and mission thread)."""
+        with self._cond:
+            if not self._link_ok or self.flavour is None:
+                return
+            hold = self._stream_hold or (self._paused and self.flavour == modes.PX4)
+            if hold:
+                target, yaw = self._position.copy(), None
+            elif self._setpoint is not None and self._in_control and not self._paused:
+                target, yaw, look_at, face = self._setpoint
+                yaw = self._heading(target, yaw, look_at, face)
+            else:
+                return
+            if self.flavour == modes.ARDUPILOT and self._mode != "GUIDED":
+                return
+        n, e, d = enu_to_ned(*target)
+        mask = POSITION_ONLY if yaw is None else POSITION_AND_YAW
+        with self._send_lock:
+            self._conn.mav.set_position_target_local_ned_send(
+                int(time.monotonic() * 1000) & 0xFFFFFFFF, self.target_system, self.target_component,
+                mav.MAV_FRAME_LOCAL_NED, mask, n, e, d, 0, 0, 0, 0, 0, 0,
+                0.0 if yaw is None else yaw_enu_to_ned(yaw), 0)
+
+    def _heading(self, target: np.ndarray, yaw: float | None, look_at: tuple[float, float] | None,
+                 face: bool) -> float | None:
+        if look_at is not None:
+            dx, dy = look_at[0] - self._position[0], look_at[1] - self._position[1]
+            return math.atan2(dy, dx) if math.hypot(dx, dy) > 1.0 else None
+        if face:
+            dx, dy = target[0] - self._position[0], target[1] - self._position[1]
+            return math.atan2(dy, dx) if math.hypot(dx, dy) > 2.0 else None
+        return yaw
+
+    # --- internals: worker -----------------------------------------------------------
+    def _loop(self) -> None:
+        next_heartbeat = next_setpoint = 0.0
+        while not self._stop.is_set():
+            try:
+                msg = self._conn.recv_match(blocking=True, timeout=0.02)
+            except (OSError, ConnectionError) as exc:  # serial unplugged, TCP reset: reopen
+                self._report(f"connection error on {self.config.url}: {exc}; reconnecting")
+                self._reopen()
+                continue
+            if msg is not None:
+                self._on_message(msg)
+            now = time.monotonic()
+            if now >= next_heartbeat:
+                next_heartbeat = now + 1.0
+                self._send_heartbeat()
+            self._check_link(now)
+            if now >= next_setpoint:
+                next_setpoint = now + self.config.setpoint_period_s
+                self._send_setpoint()
+
+    def _reopen(self) -> None:
+        try:
+            self._conn.close()
+        except OSError:
+            pass
+        while not self._stop.wait(1.0):
+            try:
+                self._conn = open_connection(self.config.url, self.config.source_system,
+                                             self.config.source_component, self.config.baud)
+                return
+            except OSError:
+                continue
+
+    def _send_heartbeat(self) -> None:
+        try:
+            with self._send_lock:
+                self._conn.mav.heartbeat_send(mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0,
+                                              mav.MAV_STATE_ACTIVE)
+        except OSError:
+            pass  # reported by the receive side
+
+    def _check_link(self, now: float) -> None:
+        if self._link_ok and now - self._last_heartbeat > self.config.heartbeat_timeout_s:
+            with self._cond:
+                self._link_ok = False
+                self._lost_at = self._last_heartbeat
+            self._report(f"link lost: no HEARTBEAT for {self.config.heartbeat_timeout_s:.1f} s; "
+                         "no new waypoints until it returns")
+
+    def _on_message(self, msg) -> None:
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            self._on_heartbeat(msg)
+            return
+        if msg.get_srcSystem() != self.target_system or msg.get_srcComponent() != self.target_component:
+            return
+        with self._cond:
+            if kind == "LOCAL_POSITION_NED":
+                self._position = np.array(ned_to_enu(msg.x, msg.y, msg.z))
+                self._velocity = np.array(ned_to_enu(msg.vx, msg.vy, msg.vz))
+                self._position_at, self._pose_time = time.monotonic(), self.clock()
+            elif kind == "ATTITUDE":
+                self._attitude = attitude_ned_to_enu(msg.roll, msg.pitch, msg.yaw)
+            elif kind == "SYS_STATUS":
+                present = msg.onboard_control_sensors_present
+                healthy = msg.onboard_control_sensors_health
+                self._prearm_ok = bool(healthy & mav.MAV_SYS_STATUS_PREARM_CHECK) or \
+                    not present & mav.MAV_SYS_STATUS_PREARM_CHECK
+                bad = present & msg.onboard_control_sensors_enabled & ~healthy & ~mav.MAV_SYS_STATUS_PREARM_CHECK
+                self._unhealthy = [e.name.replace("MAV_SYS_STATUS_", "") for bit, e in
+                                   mav.enums["MAV_SYS_STATUS_SENSOR"].items() if bit & bad and bit]
+                self._battery = (msg.voltage_battery / 1000.0, msg.battery_remaining)
+            elif kind == "GPS_RAW_INT":
+                self._gps_fix = msg.fix_type
+            elif kind == "HOME_POSITION":
+                self._home = np.array(ned_to_enu(msg.x, msg.y, msg.z))
+            elif kind == "COMMAND_ACK":
+                if msg.target_system in (0, self.config.source_system) and \
+                        msg.target_component in (0, self.config.source_component):
+                    self._acks[msg.command] = msg.result
+                    if msg.command not in self._waited and msg.result not in (mav.MAV_RESULT_ACCEPTED,
+                                                                              mav.MAV_RESULT_IN_PROGRESS):
+                        self._report(f"{modes.command_name(msg.command)} rejected: {modes.result_name(msg.result)}")
+            elif kind == "STATUSTEXT":
+                self._texts = self._texts[-19:] + [msg.text]
+                log.info("autopilot: %s", msg.text)
+            self._cond.notify_all()
+
+    def _on_heartbeat(self, msg) -> None:
+        flavour = modes.flavour_of(msg.autopilot)
+        if flavour is None or msg.type in (mav.MAV_TYPE_GCS, mav.MAV_TYPE_ONBOARD_CONTROLLER):
+            return
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if self.flavour is None:
+            if self.config.target_system not in (0, src[0]) or self.config.target_component not in (0, src[1]):
+                return
+            self.flavour, self.target_system, self.target_component = flavour, src[0], src[1]
+            self._report(f"autopilot: {flavour} (system {src[0]}, component {src[1]}, MAV_TYPE {msg.type})",
+                         logging.INFO)
+        elif src != (self.target_system, self.target_component):
+            return
+        reports = []
+        with self._cond:
+            self._last_heartbeat = time.monotonic()
+            self._armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            old, self._mode = self._mode, modes.mode_name(self.flavour, msg.custom_mode)
+            restored = not self._link_ok
+            self._link_ok = True
+            guided = modes.GUIDED_MODE[self.flavour]
+            if restored and self._lost_at:
+                reports += self._on_restored()
+            if self._in_control and not self._paused and self._mode != guided and old == guided:
+                if not (restored and self.flavour == modes.PX4 and self._mode == modes.HOLD_MODE[modes.PX4]):
+                    self._paused = True
+                    reports.append(f"pilot took over: mode {self._mode}; paused until {guided} is handed back")
+            elif self._in_control and self._paused and self._mode == guided:
+                self._paused = False
+                reports.append(f"control handed back ({guided}); resuming")
+            self._cond.notify_all()
+        for text in reports:
+            self._report(text)
+        if restored and self._lost_at:
+            self._after_restore()
+
+    def _on_restored(self) -> list[str]:
+        lost_for = time.monotonic() - self._lost_at
+        if lost_for > self.config.long_loss_s and self.config.long_loss_action != "none" and self._in_control:
+            self._in_control, self._setpoint, self._stream_hold = False, None, False
+            self._long_loss_command = (mav.MAV_CMD_NAV_RETURN_TO_LAUNCH if self.config.long_loss_action == "rtl"
+                                       else mav.MAV_CMD_NAV_LAND)
+            return [f"link restored after {lost_for:.1f} s (> {self.config.long_loss_s:.1f} s): commanding "
+                    f"{self.config.long_loss_action.upper()}"]
+        self._long_loss_command = None
+        return [f"link restored after {lost_for:.1f} s; resuming"]
+
+    def _after_restore(self) -> None:
+        """Worker side of a restored link: long-loss action, PX4 re-entry into OFFBOARD, streams again."""
+        self._request_streams()
+        if self._long_loss_command is not None:
+            self._command_long(self._long_loss_command)
+        elif self.flavour == modes.PX4 and self._in_control and self._mode == modes.HOLD_MODE[modes.PX4]:
+            # PX4 fell back to hold while our stream was stopped: the stream is back, re-enter OFFBOARD
+            main, sub = modes.PX4_MODES["OFFBOARD"]
+            threading.Timer(self.config.offboard_prestream_s, self._command_long,
+                            args=(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)).start()
+
+    def _require_link(self) -> None:
+        if not self._link_ok or self.flavour is None:
+            raise LinkLost(f"no link to the autopilot on {self.config.url}")
+
+    def _wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: predicate() or self._stop.is_set(), timeout) and predicate()
+
+    def _report(self, text: str, level: int = logging.WARNING) -> None:
+        self.events.append(text)
+        log.log(level, "%s", text)
+        if self.on_event is not None:
+            self.on_event(text)
