@@ -98,7 +98,7 @@ def test_schedule_switches_the_decision(tmp_path: Path) -> None:
     west = np.exp(-((x + 40) ** 2 + y**2) / 50).astype(np.float32)
     observed = np.zeros(g.shape, bool)
     layers = lambda obs: LayerSet(g, {"fringe": east, "time": west}, obs, np.zeros(g.shape, np.float32),  # noqa: E731
-                                  np.zeros((*g.shape, 3), np.float32))
+                                  np.zeros((*g.shape, 3), np.uint8))
     b = load_behavior("explore-then-patrol")
     dm = DecisionMaker(b)
     first = dm.decide(layers(observed), (0.0, 0.0), 0.0)

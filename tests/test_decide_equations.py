@@ -22,7 +22,7 @@ def layer_set(g: GridGeometry, observed: np.ndarray | None = None, **layers: np.
     h, w = g.shape
     obs = np.ones((h, w), bool) if observed is None else observed
     return LayerSet(g, {k: v.astype(np.float32) for k, v in layers.items()}, obs,
-                    np.zeros((h, w), np.float32), np.zeros((h, w, 3), np.float32))
+                    np.zeros((h, w), np.float32), np.zeros((h, w, 3), np.uint8))
 
 
 def test_distance_ring() -> None:

@@ -18,7 +18,7 @@ def _blobs(*centres: tuple[float, float, float]) -> LayerSet:
     for cx, cy, height in centres:
         f = np.maximum(f, height * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 30.0)).astype(np.float32)
     return LayerSet(G, {"fringe": f}, np.ones(G.shape, bool), np.zeros(G.shape, np.float32),
-                    np.zeros((*G.shape, 3), np.float32))
+                    np.zeros((*G.shape, 3), np.uint8))
 
 
 def _behavior(enabled: bool, **retarget: float) -> Behavior:
@@ -75,7 +75,7 @@ def test_terrain_altitude_by_hand() -> None:
 def test_terrain_aware_waypoints() -> None:
     layers = _blobs((40.0, 0.0, 1.0))
     elevation = np.where(np.abs(G.cell_centers()[1]) < 3, 12.0, 0.0).astype(np.float32)
-    layers = LayerSet(G, layers.layers, layers.observed, elevation, layers.color)
+    layers = LayerSet(G, layers.layers, layers.observed, elevation, layers.rgb)
     flat = DecisionMaker(Behavior(weights={"fringe": 1.0}, altitude=50.0)).decide(layers, (0.0, 0.0, 50.0), 0.0)
     assert flat.waypoint[2] == 50.0
     aware = Behavior(weights={"fringe": 1.0}, altitude=50.0, terrain=Terrain(enabled=True, clearance=25.0))

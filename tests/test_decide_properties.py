@@ -17,7 +17,7 @@ def _layers(seed: int, observed_fraction: float) -> LayerSet:
     rng = np.random.default_rng(seed)
     observed = rng.random(G.shape) < observed_fraction
     named = {k: np.where(observed, rng.random(G.shape), 0).astype(np.float32) for k in ("a", "b")}
-    return LayerSet(G, named, observed, np.zeros(G.shape, np.float32), np.zeros((*G.shape, 3), np.float32))
+    return LayerSet(G, named, observed, np.zeros(G.shape, np.float32), np.zeros((*G.shape, 3), np.uint8))
 
 
 coord = st.floats(-60.0, 60.0, allow_nan=False)
@@ -63,7 +63,7 @@ def test_zero_weight_removes_a_layers_influence(seed, weight, position) -> None:
     layers = _layers(seed, 0.7)
     rng = np.random.default_rng(seed + 1)
     other = LayerSet(G, {"a": layers["a"], "b": rng.random(G.shape).astype(np.float32)}, layers.observed,
-                     layers.elevation_m, layers.color)
+                     layers.elevation_m, layers.rgb)
     behavior = Behavior(weights={"a": weight, "b": 0.0}, r_e=5.0, r_i=50.0, area=Area(radius=35.0))
     one = DecisionMaker(behavior, seed=seed).decide(layers, position, 0.0, intermediates=True)
     two = DecisionMaker(behavior, seed=seed).decide(other, position, 0.0, intermediates=True)

@@ -33,6 +33,7 @@ class _Grid:
     xs: np.ndarray  # float32 (1, w) cell-centre x
     ys: np.ndarray  # float32 (h, 1) cell-centre y
     zone: np.ndarray  # float32 (h, w) Z
+    inside: np.ndarray  # bool Z > 0
     zone_cells: int
 
     def distance(self, x: float, y: float) -> np.ndarray:
@@ -134,7 +135,7 @@ class DecisionMaker:
             if cells == 0:
                 raise ValueError(f"geometry: the grid {geometry} does not overlap the area of interest")
             self._grid_cache = _Grid(
-                geometry, xs[:1].astype(np.float32), ys[:, :1].astype(np.float32), zone, cells
+                geometry, xs[:1].astype(np.float32), ys[:, :1].astype(np.float32), zone, zone > 0, cells
             )
         return self._grid_cache
 
@@ -147,7 +148,7 @@ class DecisionMaker:
             raise ValueError(f"time: must be finite, got {time}")
         b = self.behavior
         grid = self._grid(layers.geometry)
-        coverage = float(np.count_nonzero(layers.observed & (grid.zone > 0))) / grid.zone_cells
+        coverage = float(np.count_nonzero(layers.observed & grid.inside)) / grid.zone_cells
         weights = self.schedule.weights(time, coverage)
         a0 = np.zeros(layers.geometry.shape, np.float32)
         for name, w in weights.items():

@@ -37,25 +37,27 @@ def fringe(observed: np.ndarray, closing: int = 3) -> np.ndarray:
     if closing > 1:
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (closing, closing))
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel)
-    out = np.zeros(mask.shape, np.float32)
     if not mask.any() or mask.all():
-        return out
+        return np.zeros(mask.shape, np.float32)
     dist = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    inside = dist > 0
-    np.divide(1.0, dist, out=out, where=inside)
-    out[(dist > 0) & (dist < 1.5)] = 1.0  # d is 1 or sqrt(2) exactly on the frontier
+    with np.errstate(divide="ignore"):
+        out = np.reciprocal(dist, out=dist)  # inf on unobserved cells (d = 0)
+    out[out > 0.7] = 1.0  # d is exactly 1 or sqrt(2) on the frontier; every interior d >= 2
+    out[mask == 0] = 0.0
     return out
 
 
 def _scaled(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(v - min) / (max - min) over ``valid`` cells, 0 elsewhere and when all values are equal."""
     out = np.zeros(values.shape, np.float32)
-    v = values[valid]
-    if v.size == 0:
+    if not valid.any():
         return out
-    lo, hi = v.min(), v.max()
+    lo = float(np.min(values, where=valid, initial=np.inf))
+    hi = float(np.max(values, where=valid, initial=-np.inf))
     if hi > lo:
-        out[valid] = ((v - lo) / (hi - lo)).astype(np.float32)
+        np.subtract(values, lo, out=out, where=valid, casting="same_kind")
+        out *= np.float32(1.0 / (hi - lo))
+        np.minimum(out, 1.0, out=out)  # float32 rounding must not leave [0, 1]
     return out
 
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from layerpilot.grid import GridGeometry
+from layerpilot.layers import features
 
 
 @dataclass(frozen=True)
@@ -15,14 +17,15 @@ class LayerSet:
 
     ``observed`` (bool) and ``elevation_m`` (float32 metres, NaN unobserved) travel along
     because the decision needs coverage of the area of interest and terrain heights;
-    ``color`` (float32 (h, w, 3) in [0, 1]) is for pictures only and is never weighted.
+    ``rgb`` (uint8 (h, w, 3), the top voxel's color, 0 unobserved) is for pictures only and
+    is never weighted; ``color`` gives it as float32 in [0, 1] when a picture needs it.
     """
 
     geometry: GridGeometry
     layers: dict[str, np.ndarray]
     observed: np.ndarray
     elevation_m: np.ndarray
-    color: np.ndarray
+    rgb: np.ndarray
     now: float = 0.0
 
     def __post_init__(self) -> None:
@@ -32,7 +35,7 @@ class LayerSet:
         for name, arr, want, dtype in (
             ("observed", self.observed, shape, np.bool_),
             ("elevation_m", self.elevation_m, shape, np.float32),
-            ("color", self.color, (*shape, 3), np.float32),
+            ("rgb", self.rgb, (*shape, 3), np.uint8),
         ):
             if arr.shape != want or arr.dtype != dtype:
                 raise ValueError(f"{name}: expected {want} {np.dtype(dtype)}, got {arr.shape} {arr.dtype}")
@@ -42,6 +45,11 @@ class LayerSet:
             return self.layers[name]
         except KeyError:
             raise KeyError(f"no layer named {name!r} in this layer set; have: {', '.join(self.layers)}") from None
+
+    @cached_property
+    def color(self) -> np.ndarray:
+        """The color layer: float32 (h, w, 3) in [0, 1], black where unobserved."""
+        return features.color(self.observed, self.rgb)
 
     @property
     def names(self) -> list[str]:

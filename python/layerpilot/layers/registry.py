@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from layerpilot.layers import features
-from layerpilot.layers.layerset import LayerSet, check_layer
+from layerpilot.layers.layerset import LayerSet
 from layerpilot.map.columns import ColumnLayers
 
 
@@ -109,14 +109,13 @@ def compute_layers(
     unknown = [n for n in names if n not in _REGISTRY]
     if unknown:
         raise ValueError(f"names: no layer named {', '.join(map(repr, unknown))}; known: {', '.join(_REGISTRY)}")
-    shape = columns.geometry.shape
-    layers = {name: check_layer(name, _REGISTRY[name](columns, voxel_map, context), shape) for name in names}
+    layers = {name: _REGISTRY[name](columns, voxel_map, context) for name in names}  # LayerSet checks them
     return LayerSet(
         columns.geometry,
         layers,
         columns.observed,
-        np.where(columns.observed, columns.elevation, np.float32(np.nan)).astype(np.float32, copy=False),
-        features.color(columns.observed, columns.color),
+        columns.elevation,  # NaN where unobserved (ColumnLayers' contract)
+        columns.color,
         context.now,
     )
 

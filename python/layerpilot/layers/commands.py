@@ -1,0 +1,53 @@
+"""Layer and decision commands: `layerpilot layers render|list`, `layerpilot bench decide`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
+    p = commands.add_parser("layers", help="feature layers and decisions: pictures, registered layers")
+    sub = p.add_subparsers(dest="layers_command", required=True, metavar="ACTION")
+    r = sub.add_parser("render", help="PNGs of every layer and of A0..A3 with the chosen waypoint")
+    r.add_argument("--map", type=Path, help=".ot/.bt map (default: a synthetic survey map built on the spot)")
+    r.add_argument("--behavior", default="balanced", help="preset name or .toml file (default: balanced)")
+    r.add_argument("--position", type=float, nargs=3, metavar=("X", "Y", "Z"), help="drone position, map frame")
+    r.add_argument("--home", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"), help="launch point")
+    r.add_argument("--now", type=float, help="mission time (default: the newest observation in the window)")
+    r.add_argument("--frames", type=int, default=6, help="synthetic map: frames to insert")
+    r.add_argument("--out", type=Path, default=Path("runs/layers"))
+    r.set_defaults(func=_render)
+    ls = sub.add_parser("list", help="registered layer names (after importing a behavior's plugins)")
+    ls.add_argument("--behavior", help="also load this behavior's plugins")
+    ls.set_defaults(func=_list)
+
+    b = benches.add_parser("decide", help="layers + decision time on 512x512 and 1024x1024 grids")
+    b.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
+    b.add_argument("--repeat", type=int, default=30)
+    b.add_argument("--behavior", default="balanced")
+    b.set_defaults(func=_bench)
+
+
+def _render(args: argparse.Namespace) -> None:
+    from layerpilot.layers.scene import render_scene
+
+    for path in render_scene(args.behavior, args.out, map_path=args.map, position=args.position,
+                             home=tuple(args.home), now=args.now, frames=args.frames):
+        print(f"wrote {path}")
+
+
+def _list(args: argparse.Namespace) -> None:
+    from layerpilot.layers import layer_names
+
+    if args.behavior:
+        from layerpilot.decide import load_behavior
+
+        load_behavior(args.behavior)
+    print("\n".join(layer_names()))
+
+
+def _bench(args: argparse.Namespace) -> None:
+    from layerpilot.decide.bench import print_decide_bench, run_decide_bench
+
+    print_decide_bench(run_decide_bench(args.sizes, args.repeat, args.behavior))
