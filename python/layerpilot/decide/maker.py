@@ -171,21 +171,23 @@ class DecisionMaker:
         return _Scores(layers, grid, weights, coverage, a0, a1, p, h, a3, allowed, d)
 
     def _pick(self, score: np.ndarray) -> tuple[int, int] | None:
-        """Argmax of ``score`` with seeded tie-breaking noise on positive cells; None if none > 0."""
-        noisy = self._noisy(score)
-        flat = int(np.argmax(noisy))
-        if not score.flat[flat] > 0:
+        """Argmax of ``score`` + seeded noise in [0, noise) on positive cells; None if no cell is > 0.
+
+        Only cells within ``noise`` of the maximum can win, so noise is drawn for those
+        alone: the same choice as noising every cell, at the cost of one comparison.
+        """
+        top = float(score.max())
+        if not top > 0:
             return None
-        return divmod(flat, score.shape[1])
+        noise = np.float32(self.behavior.noise)
+        flat = np.flatnonzero(score >= max(top - noise, np.finfo(np.float32).tiny))
+        if len(flat) > 1 and noise > 0:
+            flat = flat[np.argmax(score.flat[flat] + noise * self.rng.random(len(flat), dtype=np.float32))]
+        else:
+            flat = flat[0]
+        return divmod(int(flat), score.shape[1])
 
-    def _noisy(self, score: np.ndarray) -> np.ndarray:
-        u = self.rng.random(score.shape, dtype=np.float32)
-        u *= np.float32(self.behavior.noise)
-        u *= score > 0
-        u += score
-        return u
-
-    def _runner_up(self, scores: _Scores, best: tuple[int, int], noisy: np.ndarray) -> tuple[int, int] | None:
+    def _runner_up(self, scores: _Scores, best: tuple[int, int]) -> tuple[int, int] | None:
         """Best cell at least r_e (and one cell) from the winner: a genuinely different option."""
         g = scores.grid.geometry
         reach = max(self.behavior.r_e, g.resolution)
@@ -195,19 +197,18 @@ class DecisionMaker:
         bx, by = g.cell_center(*best)
         dx = scores.grid.xs[:, c0:c1] - np.float32(bx)
         dy = scores.grid.ys[r0:r1] - np.float32(by)
-        window = noisy[r0:r1, c0:c1]
-        window[dx * dx + dy * dy < reach * reach] = -1.0
-        flat = int(np.argmax(noisy))
-        if not scores.a3.flat[flat] > 0:
-            return None
-        return divmod(flat, noisy.shape[1])
+        window = scores.a3[r0:r1, c0:c1]
+        saved = window.copy()
+        window[dx * dx + dy * dy < reach * reach] = 0.0
+        try:
+            return self._pick(scores.a3)
+        finally:
+            window[...] = saved
 
     def _choose(self, scores: _Scores, position: Sequence[float], time: float, intermediates: bool) -> Decision:
-        noisy = self._noisy(scores.a3)
-        flat = int(np.argmax(noisy))
-        if scores.a3.flat[flat] > 0:
-            best = divmod(flat, noisy.shape[1])
-            runner = self._runner_up(scores, best, noisy)
+        best = self._pick(scores.a3)
+        if best is not None:
+            runner = self._runner_up(scores, best)
             return self._explain(scores, best, position, time, runner, intermediates=intermediates)
         cell, rule = self._fallback(scores)
         return self._explain(scores, cell, position, time, None, fallback=rule, intermediates=intermediates)

@@ -17,6 +17,8 @@ if TYPE_CHECKING:
     from layerpilot.decide.decision import Decision
 
 TITLES = {
+    "color": "Color of the top voxel",
+    "elevation_m": "Elevation: top of the highest occupied voxel",
     "fringe": "Fringe: edge of the known map",
     "time": "Time since last seen (scaled)",
     "distance": "Minimum observed distance / 100 m",
