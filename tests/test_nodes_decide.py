@@ -81,7 +81,8 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         world.put(k1.pose, msg.encode_state(msg.State(9.0, "uav1", w1.position + [1.0, 0, 0])))
         wait_for(lambda: len(got["uav1"]) == 2, "uav1's second waypoint")
         assert got["uav1"][1].seq == 2 and nodes[0].reached == 1
-        assert nodes[0].distance_flown > np.hypot(*w1.position[:2])
+        flown = np.hypot(*(0.5 * w1.position[:2])) + np.hypot(*(0.5 * w1.position[:2] + [1.0, 0]))
+        assert nodes[0].distance_flown == pytest.approx(flown)
 
         world.put(k1.layers, b"\x08\x01garbage")
         world.put(k1.pose, b"\xff" * 10)

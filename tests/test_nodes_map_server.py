@@ -124,8 +124,10 @@ def test_full_queue_drops_oldest_and_stays_bounded(bus):
 def test_daemon_process_serves_and_exits_on_sigterm(tmp_path):
     ep = free_endpoint()
     snap = tmp_path / "map.ot"
-    proc = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "map-server", "--endpoint", ep,
-                             "--snapshot", str(snap), "--status-every", "0.2"],
+    mission = tmp_path / "mission.toml"
+    mission.write_text("[map_server]\nresolution = 0.5\nwindow = [-10.0, -10.0, 40, 40]\n")
+    proc = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "map-server", "--config", str(mission),
+                             "--endpoint", ep, "--snapshot", str(snap), "--status-every", "0.2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     client = None
     try:

@@ -61,7 +61,6 @@ class DecideNode:
         self.seq = 0
         self.reached = 0
         self.distance_flown = 0.0
-        self._last_pos: np.ndarray | None = None
         self.target: np.ndarray | None = None
 
     def start(self) -> None:
@@ -93,6 +92,8 @@ class DecideNode:
 
     def _on_state(self, state: State, key: str) -> None:
         with self._cond:
+            if self._state is not None:
+                self.distance_flown += float(np.linalg.norm(state.position - self._state.position))
             self._state = state
             self._cond.notify()
 
@@ -121,9 +122,6 @@ class DecideNode:
         if self._layers is None or self._state is None:
             return False
         pos = self._state.position
-        if self._last_pos is not None:
-            self.distance_flown += float(np.linalg.norm(pos - self._last_pos))
-        self._last_pos = pos
         if self.target is None:
             return True
         if np.hypot(*(pos[:2] - self.target[:2])) <= self.cfg.arrival_radius:
