@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -85,6 +87,9 @@ def test_each_stage_by_hand() -> None:
     # runner-up: best cell at least r_e = 2 m from the winner -> cell 4 (cell 3 is too close)
     assert d.runner_up.cell == (0, 4) and d.runner_up.score == pytest.approx(0.24)
     assert "A0 0.4500" in d.explain()
+    record = json.loads(json.dumps(d.to_dict()))  # decisions.jsonl / the bus
+    assert record["waypoint"] == [2.5, 0.5, 42.0] and record["runner_up"]["cell"] == [0, 4]
+    assert "intermediates" not in record
 
 
 def test_noise_breaks_ties_reproducibly() -> None:
