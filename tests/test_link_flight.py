@@ -6,6 +6,7 @@ clock by nature, so the tests shorten them through LinkConfig.
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 
@@ -276,3 +277,23 @@ def test_command_line(vehicle, capsys):
     assert vehicle.pose().yaw == pytest.approx(np.pi / 2, abs=0.05)
     assert cli_main(["link", "--mavlink", url, "land"]) == 0
     assert not vehicle.armed
+
+
+def test_reconnects_when_the_vehicle_comes_back_on_the_same_port():
+    port = free_port(socket.SOCK_STREAM)
+    url = f"tcp:127.0.0.1:{port}"
+    with FlightLink(LinkConfig(url=url, heartbeat_timeout_s=1.0, **FAST)) as lk:
+        with pytest.raises(LinkLost, match="Connection refused"):
+            lk.connect(0.5)                          # nobody serves yet
+        first = MavlinkVehicle(Multicopter(), url).start(speed=SPEED)
+        lk.connect(5.0)
+        first.stop()                                 # the autopilot goes away (reboot, cable)
+        wait_until(lambda: not lk.link_ok, 5.0, "link loss")
+        assert any(e.startswith("connection error") for e in lk.events)
+        second = MavlinkVehicle(Multicopter(), url).start(speed=SPEED)
+        try:
+            wait_until(lambda: lk.link_ok, 5.0, "reconnection")
+            lk.wait_ready()
+            assert second.clients == 1
+        finally:
+            second.stop()

@@ -24,11 +24,21 @@ def parse_url(url: str, baud: int = 57600) -> tuple[str, int]:
 
 
 def open_connection(url: str, source_system: int, source_component: int, baud: int = 57600):
-    """A pymavlink connection speaking MAVLink 2 with the ardupilotmega dialect (a superset of common)."""
+    """A pymavlink connection speaking MAVLink 2 with the ardupilotmega dialect (a superset of common).
+
+    One connection attempt, no hidden reconnection inside pymavlink (it would block
+    the caller): :class:`~layerpilot.link.link.FlightLink` reconnects on its own schedule.
+    """
     device, baud = parse_url(url, baud)
     os.environ["MAVLINK20"] = "1"  # pymavlink picks the wire protocol from the environment
     conn = mavutil.mavlink_connection(device, baud=baud, source_system=source_system,
                                       source_component=source_component, dialect="ardupilotmega",
-                                      autoreconnect=True)
+                                      autoreconnect=False, retries=0)
     conn.WIRE_PROTOCOL_VERSION = "2.0"
+    if isinstance(conn, mavutil.mavtcp):
+        conn.handle_eof = conn.handle_disconnect = _closed  # raise instead of printing and carrying on
     return conn
+
+
+def _closed() -> None:
+    raise ConnectionError("connection closed by the other end")

@@ -42,6 +42,7 @@ log = logging.getLogger("layerpilot.link")
 POSITION_ONLY = 0b110111111000      # x, y, z used; velocity, acceleration, yaw, yaw rate ignored
 POSITION_AND_YAW = 0b100111111000   # as above plus yaw
 POSITION_FRESH_S = 2.0              # a position estimate older than this does not count
+RECONNECT_PERIOD_S = 1.0            # while lost, a stream connection (TCP, serial) is reopened this often
 
 
 class LinkError(RuntimeError):
@@ -82,9 +83,11 @@ class FlightLink:
         self.clock = clock
         self.on_event = on_event
         self.events: list[str] = []
-        self._conn = open_connection(self.config.url, self.config.source_system, self.config.source_component,
-                                     self.config.baud)
         self._send_lock = threading.Lock()
+        self._conn = None
+        self._connection_error = ""
+        self._reopen_at = 0.0
+        self._open()
         self._cond = threading.Condition()
         self._stop = threading.Event()
         # autopilot state (guarded by _cond)
@@ -123,14 +126,15 @@ class FlightLink:
         """Wait for an ArduPilot/PX4 HEARTBEAT, ask for telemetry streams; returns the autopilot flavour."""
         timeout = self.config.connect_timeout_s if timeout is None else timeout
         if not self._wait(lambda: self._link_ok, timeout):
-            raise LinkLost(f"no ArduPilot/PX4 HEARTBEAT on {self.config.url} within {timeout:.1f} s")
+            why = f" ({self._connection_error})" if self._conn is None and self._connection_error else ""
+            raise LinkLost(f"no ArduPilot/PX4 HEARTBEAT on {self.config.url} within {timeout:.1f} s{why}")
         self._request_streams()
         return self.flavour
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
-        self._conn.close()
+        self._close_connection()
 
     def __enter__(self) -> FlightLink:
         return self
@@ -336,8 +340,8 @@ class FlightLink:
 
     def _command_long(self, command: int, *params: float, confirmation: int = 0) -> None:
         p = list(params) + [0.0] * (7 - len(params))
-        with self._send_lock:
-            self._conn.mav.command_long_send(self.target_system, self.target_component, command, confirmation, *p)
+        self._transmit(lambda m: m.command_long_send(self.target_system, self.target_component, command,
+                                                      confirmation, *p))
 
     def _request_streams(self) -> None:
         """Ask for the streams the link needs (ACKs checked by the worker: refusals are reported)."""
@@ -412,11 +416,10 @@ class FlightLink:
                 return
         n, e, d = enu_to_ned(*target)
         mask = POSITION_ONLY if yaw is None else POSITION_AND_YAW
-        with self._send_lock:
-            self._conn.mav.set_position_target_local_ned_send(
-                int(time.monotonic() * 1000) & 0xFFFFFFFF, self.target_system, self.target_component,
-                mav.MAV_FRAME_LOCAL_NED, mask, n, e, d, 0, 0, 0, 0, 0, 0,
-                0.0 if yaw is None else yaw_enu_to_ned(yaw), 0)
+        self._transmit(lambda m: m.set_position_target_local_ned_send(
+            int(time.monotonic() * 1000) & 0xFFFFFFFF, self.target_system, self.target_component,
+            mav.MAV_FRAME_LOCAL_NED, mask, n, e, d, 0, 0, 0, 0, 0, 0,
+            0.0 if yaw is None else yaw_enu_to_ned(yaw), 0))
 
     def _heading(self, target: np.ndarray, yaw: float | None, look_at: tuple[float, float] | None,
                  face: bool) -> float | None:
@@ -432,43 +435,63 @@ class FlightLink:
     def _loop(self) -> None:
         next_heartbeat = next_setpoint = 0.0
         while not self._stop.is_set():
-            try:
-                msg = self._conn.recv_match(blocking=True, timeout=0.02)
-            except (OSError, ConnectionError) as exc:  # serial unplugged, TCP reset: reopen
-                self._report(f"connection error on {self.config.url}: {exc}; reconnecting")
-                self._reopen()
-                continue
+            msg = None
+            conn = self._conn
+            if conn is None:
+                self._stop.wait(0.02)
+            else:
+                try:
+                    msg = conn.recv_match(blocking=True, timeout=0.02)
+                except (OSError, ConnectionError) as exc:  # TCP reset, serial unplugged
+                    self._report(f"connection error on {self.config.url}: {exc}; reconnecting")
+                    self._close_connection()
             if msg is not None:
                 self._on_message(msg)
             now = time.monotonic()
             if now >= next_heartbeat:
                 next_heartbeat = now + 1.0
-                self._send_heartbeat()
+                self._transmit(lambda m: m.heartbeat_send(mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID,
+                                                          0, 0, mav.MAV_STATE_ACTIVE))
             self._check_link(now)
             if now >= next_setpoint:
                 next_setpoint = now + self.config.setpoint_period_s
                 self._send_setpoint()
+            stream = not self.config.url.startswith("udp")
+            silent = now - self._last_heartbeat > self.config.heartbeat_timeout_s
+            if now >= self._reopen_at and (self._conn is None or (stream and silent)):
+                self._open()
 
-    def _reopen(self) -> None:
+    def _open(self) -> None:
+        """(Re)open the connection once; on failure the worker tries again after RECONNECT_PERIOD_S."""
+        self._reopen_at = time.monotonic() + RECONNECT_PERIOD_S
+        self._close_connection()
         try:
-            self._conn.close()
-        except OSError:
-            pass
-        while not self._stop.wait(1.0):
+            conn = open_connection(self.config.url, self.config.source_system, self.config.source_component,
+                                   self.config.baud)
+        except OSError as exc:
+            self._connection_error = str(exc)
+            return
+        with self._send_lock:
+            self._conn = conn
+
+    def _close_connection(self) -> None:
+        with self._send_lock:
+            conn, self._conn = self._conn, None
+        if conn is not None:
             try:
-                self._conn = open_connection(self.config.url, self.config.source_system,
-                                             self.config.source_component, self.config.baud)
-                return
-            except OSError:
-                continue
+                conn.close()
+            except (OSError, AttributeError):  # pymavlink's TCP close after a failed reconnect has no socket
+                pass
 
-    def _send_heartbeat(self) -> None:
-        try:
-            with self._send_lock:
-                self._conn.mav.heartbeat_send(mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0,
-                                              mav.MAV_STATE_ACTIVE)
-        except OSError:
-            pass  # reported by the receive side
+    def _transmit(self, send: Callable) -> None:
+        """Send with the connection's encoder; dropped while disconnected (the failsafes report that)."""
+        with self._send_lock:
+            if self._conn is None:
+                return
+            try:
+                send(self._conn.mav)
+            except OSError:
+                pass
 
     def _check_link(self, now: float) -> None:
         if self._link_ok and now - self._last_heartbeat > self.config.heartbeat_timeout_s:
