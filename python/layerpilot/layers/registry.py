@@ -84,6 +84,7 @@ def load_plugins(plugins: Iterable[str], base: Path | None = None) -> None:
                 path = base / path
             if not path.is_file():
                 raise ValueError(f"plugins: no such file {path}")
+            path = path.resolve()  # one module per file, however the behavior spells its path
             name = f"layerpilot_plugin_{path.stem}"
             if sys.modules.get(name) is not None and getattr(sys.modules[name], "__file__", None) == str(path):
                 continue
