@@ -20,15 +20,15 @@ def test_render_writes_every_layer_and_the_decision(tmp_path: Path) -> None:
     columns = synthetic_columns(128)
     layers = compute_layers(columns, LayerContext(now=600.0))
     decision = DecisionMaker(load_behavior("balanced")).decide(layers, (0.0, 0.0, 50.0), 600.0, intermediates=True)
-    paths = render(layers, tmp_path, decision, (0.0, 0.0, 50.0), title="test")
+    paths = render(layers, tmp_path, decision, (0.0, 0.0, 50.0), title="test", dpi=60)
     names = {p.stem for p in paths}
     assert names >= {"color", "elevation_m", "fringe", "time", "distance", "elevation",
                      "A0", "A1", "A2", "A3", "Z", "P", "H", "overview"}
     a3 = cv2.imread(str(tmp_path / "A3.png"))
-    assert a3 is not None and a3.shape[0] > 300 and a3.shape[1] > 300
+    assert a3 is not None and a3.shape[0] > 250 and a3.shape[1] > 250
     # the waypoint is drawn as a pure red star: such pixels exist on A3 but not on a plain render
     red = lambda img: np.count_nonzero((img[..., 2] > 200) & (img[..., 1] < 40) & (img[..., 0] < 40))  # noqa: E731
-    plain = render(layers, tmp_path / "plain")
+    plain = render(layers, tmp_path / "plain", dpi=60)
     assert red(a3) > 20 and red(cv2.imread(str(tmp_path / "plain" / "fringe.png"))) == 0
     assert len(plain) == 1 + 2 + len(layers.names)  # no decision: no A images
 
