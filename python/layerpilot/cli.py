@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "layerpilot.sim.commands",
     "layerpilot.nodes.commands",
     "layerpilot.link.commands",
+    "layerpilot.eval.commands",
 ]
 
 
