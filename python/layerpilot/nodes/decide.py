@@ -3,7 +3,8 @@
 Zenoh callbacks only keep the newest layer set and pose; one worker makes a decision
 tick when there is no target yet or the drone has arrived (within ``arrival_radius``),
 stamped with the pose's mission clock. Other vehicles' current targets, heard on
-``layerpilot/*/decision``, are passed to the maker as points to avoid.
+``layerpilot/*/decision``, are passed to the maker as points to avoid. The current
+waypoint is re-sent every second, so a link that (re)starts later still gets it.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from layerpilot.decide.maker import DecisionMaker
 from layerpilot.layers import LayerContext, compute_layers
 
 _log = logging.getLogger("layerpilot.decide")
+REPEAT_PERIOD = 1.0  # s: the current waypoint is re-sent this often until reached
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,7 @@ class DecideNode:
         self.reached = 0
         self.distance_flown = 0.0
         self.target: np.ndarray | None = None
+        self._waypoint_msg: bytes | None = None
 
     def start(self) -> None:
         s, k = self.session, self.keys
@@ -105,10 +108,13 @@ class DecideNode:
     def _loop(self) -> None:
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: self._stop.is_set() or self._due(), timeout=1.0)
+                self._cond.wait_for(lambda: self._stop.is_set() or self._due(), timeout=REPEAT_PERIOD)
                 if self._stop.is_set():
                     return
                 if not self._due():
+                    repeat = self._waypoint_msg
+                    if repeat is not None:  # a link that started (or restarted) late still gets its target
+                        self.session.put(self.keys.waypoint, repeat)
                     continue
                 ls, state, avoid = self._layers, self._state, list(self._others.values())
             try:
@@ -147,7 +153,8 @@ class DecideNode:
         v = self.keys.vehicle
         self.session.put(self.keys.decision, encode_decision(
             Decision(state.stamp, v, self.seq, wp, d.score, terms, self.behavior.name)))
-        self.session.put(self.keys.waypoint, encode_waypoint(Waypoint(state.stamp, v, self.seq, wp, speed=self.cfg.speed)))
+        self._waypoint_msg = encode_waypoint(Waypoint(state.stamp, v, self.seq, wp, speed=self.cfg.speed))
+        self.session.put(self.keys.waypoint, self._waypoint_msg)
         self.session.put(self.keys.state, encode_mission_state(MissionState(
             state.stamp, v, "survey", self.seq, self.reached, self.distance_flown, wp)))
         _log.info("%s", d.explain())

@@ -25,12 +25,6 @@ def bus_config(tables: dict[str, Any], endpoint: str | None, mode: str | None = 
     return from_dict(BusConfig, data, "bus")
 
 
-def table(cls: type, tables: dict[str, Any], name: str, overrides: dict[str, Any]) -> Any:
-    data = dict(tables.get(name, {}))
-    data.update({k: v for k, v in overrides.items() if v is not None})
-    return from_dict(cls, data, name)
-
-
 def stop_event() -> threading.Event:
     """An event set by SIGTERM or SIGINT: the node finishes its current message, then exits."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
@@ -40,4 +34,4 @@ def stop_event() -> threading.Event:
     return stop
 
 
-__all__ = ["ConfigError", "bus_config", "load_tables", "stop_event", "table"]
+__all__ = ["ConfigError", "bus_config", "load_tables", "stop_event"]
