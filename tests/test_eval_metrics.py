@@ -117,3 +117,14 @@ def test_map_voxel_metrics_on_real_maps() -> None:
     once = VoxelMap(1.0)
     once.insert(wall, origin)
     assert map_voxel_metrics(once, gt_map, lo, hi).n_est == 0
+
+
+def test_nearest_distances_max_distance_stops_early_but_stays_exact_within() -> None:
+    rng = np.random.default_rng(5)
+    ref = rng.uniform(0, 10, (300, 3))
+    pts = np.concatenate([rng.uniform(0, 10, (200, 3)), rng.uniform(100, 120, (50, 3))])
+    full = nearest_distances(pts, ref, cell=1.0)
+    capped = nearest_distances(pts, ref, cell=1.0, max_distance=4.0)
+    near = full <= 4.0
+    np.testing.assert_array_equal(capped[near], full[near])
+    assert np.isinf(capped[~near]).all() and (~near).sum() == 50

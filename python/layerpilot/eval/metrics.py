@@ -88,17 +88,23 @@ def _points(value: object, name: str) -> np.ndarray:
     return arr
 
 
-def nearest_distances(points: np.ndarray, reference: np.ndarray, cell: float = D_V) -> np.ndarray:
-    """Exact Euclidean distance from each point to its nearest reference point (inf if none).
+def nearest_distances(
+    points: np.ndarray, reference: np.ndarray, cell: float = D_V, max_distance: float = np.inf
+) -> np.ndarray:
+    """Exact Euclidean distance from each point to its nearest reference point.
 
-    A hash grid of ``cell``-sized cubes: a query checks its own cell and the 26 around it,
-    which settles every query whose best distance is <= ``cell``; the rest are retried on a
-    grid 4x coarser, so far outliers cost few passes and the answer stays exact.
+    inf where there is no reference point, or none within ``max_distance`` (then the search
+    stops early: that is all a match count needs). A hash grid of ``cell``-sized cubes: a
+    query checks its own cell and the 26 around it, which settles every query whose best
+    distance is <= ``cell``; the rest are retried on a grid 4x coarser, so far outliers cost
+    few passes and the answer stays exact.
     """
     pts = _points(points, "points")
     ref = _points(reference, "reference")
     if not cell > 0:
         raise ValueError(f"cell: must be > 0, got {cell}")
+    if not max_distance > 0:
+        raise ValueError(f"max_distance: must be > 0, got {max_distance}")
     best = np.full(len(pts), np.inf)
     if len(pts) == 0 or len(ref) == 0:
         return best
@@ -110,6 +116,9 @@ def nearest_distances(points: np.ndarray, reference: np.ndarray, cell: float = D
         if cell > span:  # every reference point was within the 27 cells
             break
         todo = todo[best[todo] > cell]
+        if cell >= max_distance:  # the rest are farther than max_distance
+            best[todo] = np.inf
+            break
         cell *= 4.0
     return best
 
@@ -167,7 +176,7 @@ def voxel_metrics(est: np.ndarray, gt: np.ndarray, d_v: float = D_V) -> VoxelMet
     nan = float("nan")
     d_est = nearest_distances(est, gt, d_v / 4)  # most matches settle on the fine grid
     est_matched = int(np.count_nonzero(d_est <= d_v))
-    gt_matched = int(np.count_nonzero(nearest_distances(gt, est, d_v / 4) <= d_v))
+    gt_matched = int(np.count_nonzero(nearest_distances(gt, est, d_v / 4, max_distance=d_v) <= d_v))
     precision = est_matched / len(est) if len(est) else nan
     recall = gt_matched / len(gt) if len(gt) else nan
     if precision + recall > 0:
