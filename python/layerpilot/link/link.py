@@ -118,6 +118,7 @@ class FlightLink:
         self._setpoint: tuple[np.ndarray, float | None, tuple[float, float] | None, bool] | None = None
         self._stream_hold = False   # PX4: stream the current position (pre-arm, takeoff prep, pause)
         self._long_loss_command: int | None = None
+        self._abandoned = ""        # why the current waypoint was dropped (long loss, land/RTL requested)
         self._thread = threading.Thread(target=self._loop, name="flight-link", daemon=True)
         self._thread.start()
 
@@ -313,6 +314,7 @@ class FlightLink:
     def _release(self, command: int, what: str, wait: bool, timeout: float) -> None:
         with self._cond:
             self._in_control, self._paused, self._setpoint, self._stream_hold = False, False, None, False
+            self._abandoned = f"{what} requested"
         self.command(command)
         if wait and not self._wait(lambda: not self._armed, timeout):
             raise LinkError(f"{what}: still armed after {timeout:.1f} s")
@@ -375,7 +377,7 @@ class FlightLink:
                       face: bool) -> None:
         with self._cond:
             self._setpoint = (target, yaw, look_at, face)
-            self._stream_hold = False
+            self._stream_hold, self._abandoned = False, ""
         self._send_setpoint()
 
     def _wait_arrival(self, target: np.ndarray, timeout: float, use_setpoint: bool) -> bool:
@@ -385,9 +387,9 @@ class FlightLink:
         while time.monotonic() < deadline:
             if self._stop.is_set():
                 raise LinkError("link closed")
-            if use_setpoint and self._setpoint is None and self._in_control is False:
-                raise LinkLost("waypoint abandoned: the link commanded "
-                               f"{self.config.long_loss_action.upper()} after a long link loss")
+            if use_setpoint and self._abandoned:
+                raise LinkLost(f"waypoint abandoned: {self._abandoned}") if "link loss" in self._abandoned \
+                    else LinkError(f"waypoint abandoned: {self._abandoned}")
             fresh = time.monotonic() - self._position_at < POSITION_FRESH_S
             close = np.linalg.norm(self._position - target) <= self.config.arrival_tolerance_m
             if self._link_ok and fresh and close and not self._paused:
@@ -580,6 +582,7 @@ class FlightLink:
         lost_for = time.monotonic() - self._lost_at
         if lost_for > self.config.long_loss_s and self.config.long_loss_action != "none" and self._in_control:
             self._in_control, self._setpoint, self._stream_hold = False, None, False
+            self._abandoned = f"the link commanded {self.config.long_loss_action.upper()} after a long link loss"
             self._long_loss_command = (mav.MAV_CMD_NAV_RETURN_TO_LAUNCH if self.config.long_loss_action == "rtl"
                                        else mav.MAV_CMD_NAV_LAND)
             return [f"link restored after {lost_for:.1f} s (> {self.config.long_loss_s:.1f} s): commanding "

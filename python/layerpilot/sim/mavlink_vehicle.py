@@ -314,7 +314,8 @@ class MavlinkVehicle:
         self.armed, self.vehicle.motors_on = True, True
         self._ground_time = 0.0
         self.vehicle.hold()
-        self._text(mav.MAV_SEVERITY_INFO, "Arming motors" if self.flavour == modes.ARDUPILOT else "Armed by external command")
+        self._text(mav.MAV_SEVERITY_INFO,
+                   "Arming motors" if self.flavour == modes.ARDUPILOT else "Armed by external command")
         return mav.MAV_RESULT_ACCEPTED
 
     def _disarm(self, force: bool) -> int:
