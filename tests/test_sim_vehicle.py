@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import enu_to_ned, yaw_enu_to_ned
+from layerpilot.link.relay import free_port
 from layerpilot.sim.geodesy import GeoOrigin
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter, VehicleLimits
@@ -300,3 +302,39 @@ def test_hold_brakes_to_the_stopping_point_without_coming_back():
     assert np.all(np.diff(rows[:, 1]) >= -1e-9)              # never reverses
     assert v.position[0] - x0 == pytest.approx(10.0 ** 2 / (2 * 4.0 * 0.8), abs=0.3)
     assert np.linalg.norm(v.velocity) < 0.01
+
+
+def test_udp_endpoints_px4_sitl_style_and_udpin():
+    port = free_port()
+    endpoint = MavlinkVehicle(Multicopter(), [f"udpout:127.0.0.1:{port}", "udpin:127.0.0.1:0"])
+    listener = open_connection(f"udpin:127.0.0.1:{port}", 255, 190)        # like an offboard API on 14540
+    sender = open_connection(f"udpout:127.0.0.1:{endpoint.addresses[1][1]}", 254, 190)
+    try:
+        sender.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # udpin learns its peer
+        got = {"listener": [], "sender": []}
+        for _ in range(60):
+            endpoint.step(DT)
+            for name, conn in (("listener", listener), ("sender", sender)):
+                while (msg := conn.recv_match(blocking=False)) is not None:
+                    got[name].append(msg)
+        for name in got:
+            assert sum(m.get_type() == "HEARTBEAT" for m in got[name]) == 2, name
+        assert endpoint.clients == 2
+        listener.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, 4, 0, 0, 0, 0, 0)
+        for _ in range(10):
+            endpoint.step(DT)
+        assert endpoint.mode == "GUIDED"
+    finally:
+        listener.close()
+        sender.close()
+        endpoint.stop()
+
+
+def test_realtime_loop_never_runs_ahead_of_the_paced_clock():
+    endpoint = MavlinkVehicle(Multicopter(), "tcp:127.0.0.1:0")
+    t0 = time.monotonic()
+    endpoint.start(speed=4.0)
+    time.sleep(0.5)
+    endpoint.stop()
+    elapsed = time.monotonic() - t0
+    assert 0.0 < endpoint.time <= 4.0 * elapsed + 0.02
