@@ -1,0 +1,132 @@
+"""The whole loop as processes on loopback: sim -> depth -> map-server -> decide -> link -> sim,
+started by `layerpilot up`; the map server is killed with SIGKILL mid-mission and must come back."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from layerpilot.bus import messages as msg
+from layerpilot.bus.keys import Keys
+from layerpilot.bus.layerset import decode_layer_set
+from layerpilot.bus.proto_gen import messages_pb2 as pb
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+
+K = Keys("uav1")
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def map_stats(session) -> pb.MapStats | None:
+    replies = list(session.get(K.service("stats"), timeout=3.0))
+    return pb.MapStats.FromString(replies[0].ok.payload.to_bytes()) if replies and replies[0].ok else None
+
+
+def test_mission_flies_and_survives_map_server_kill(tmp_path):
+    ep = free_endpoint()
+    mission = tmp_path / "mission.toml"
+    mission.write_text(f"""
+vehicles = ["uav1"]
+speed = 3.0
+mavlink_port = {free_tcp_port()}
+[map_server]
+resolution = 1.0
+layers_rate = 2.0
+window = [-128.0, -128.0, 256, 256]
+snapshot = "{tmp_path / 'map.ot'}"
+snapshot_period = 2.0
+[depth]
+source = "ground_truth"
+stride = 4
+[decide]
+behavior = "balanced"
+[link]
+takeoff_altitude = 30.0
+[sim]
+frame_rate_hz = 2.0
+[sim.camera]
+width = 160
+height = 120
+""")
+    up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission), "--endpoint", ep,
+                           "--status-every", "1"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                          start_new_session=True)
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
+    client = None
+    try:
+        time.sleep(1.0)
+        client = open_session(BusConfig(endpoint=ep))
+        layer_stamps: list[float] = []
+        waypoints: list[msg.Waypoint] = []
+        poses: list[msg.State] = []
+        subs = [
+            client.declare_subscriber(K.layers, lambda s: layer_stamps.append(decode_layer_set(s.payload.to_bytes()).stamp)),
+            client.declare_subscriber(K.waypoint, lambda s: waypoints.append(msg.decode_waypoint(s.payload.to_bytes()))),
+            client.declare_subscriber(K.pose, lambda s: poses.append(msg.decode_state(s.payload.to_bytes()))),
+        ]
+
+        def wait_for(cond, what, timeout=90.0):
+            end = time.monotonic() + timeout
+            while not cond():
+                assert up.poll() is None, "up exited:\n" + "".join(lines[-30:])
+                assert time.monotonic() < end, f"timed out waiting for {what}:\n" + "".join(lines[-30:])
+                time.sleep(0.2)
+
+        wait_for(lambda: len({w.seq for w in waypoints}) >= 3, "three waypoints")
+        wait_for(lambda: (s := map_stats(client)) is not None and s.snapshots_written >= 1, "a snapshot")
+        before = map_stats(client)
+        time.sleep(2.5)  # let one more snapshot period pass with this map
+        pid = int(re.findall(r"map-server\s+alive pid=(\d+)", "".join(lines))[-1])
+        os.kill(pid, signal.SIGKILL)
+        t_kill = layer_stamps[-1]  # layer sets carry the simulator's clock (the clouds' stamps)
+        wait_for(lambda: re.search(r"map-server\s+alive pid=(?!%d)\d+ restarts=1" % pid, "".join(lines)), "restart")
+        wait_for(lambda: (s := map_stats(client)) is not None, "the restarted map server")
+        after = map_stats(client)
+        assert after.leaves >= before.leaves  # reloaded from the snapshot, not empty
+        assert after.clouds_inserted < before.clouds_inserted  # a fresh process...
+        seq_at_restart = max(w.seq for w in waypoints)
+        wait_for(lambda: layer_stamps[-1] >= 60.0 and max(w.seq for w in waypoints) >= seq_at_restart + 2,
+                 "60 mission seconds and two more waypoints after the restart", timeout=120)
+        final = map_stats(client)
+        assert final.leaves > before.leaves  # the map kept growing after the crash
+        assert final.clouds_dropped == 0
+
+        # waypoints were reached: the vehicle came within 3 m (horizontal) of all but the newest
+        reached = 0
+        seqs = sorted({w.seq: w for w in waypoints}.items())
+        track = np.array([p.position for p in poses])
+        for _, w in seqs[:-1]:
+            if np.min(np.hypot(*(track[:, :2] - w.position[:2]).T)) <= 3.0:
+                reached += 1
+        assert reached >= len(seqs) - 2, (reached, len(seqs))
+        # layer sets at the configured 2 Hz of wall time (pose stamps are the link's wall clock); allow for the restart
+        wall = poses[-1].stamp - poses[0].stamp
+        assert len(layer_stamps) >= 0.75 * 2.0 * wall - 4, (len(layer_stamps), wall)
+        assert t_kill < 60.0
+        for s in subs:
+            s.undeclare()
+    finally:
+        if client is not None:
+            client.close()
+        if up.poll() is None:
+            up.send_signal(signal.SIGTERM)
+            try:
+                up.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(up.pid, signal.SIGKILL)
+                up.wait()
+    assert up.returncode == 0
+    assert "stopped map-server (0), sim/uav1 (0), link/uav1 (0), depth/uav1 (0), decide/uav1 (0)" in "".join(lines)
