@@ -85,7 +85,8 @@ class _Pilot:
         self.behavior = load_behavior("balanced" if cfg.behavior in BASELINES else cfg.behavior)
         self.area = self.behavior.area
         self.altitude = self.behavior.altitude
-        self.script: list[np.ndarray] | None = None
+        self.script: np.ndarray | None = None  # (N, 4) x, y, z, yaw; flown in a loop
+        self._next = 0
         if cfg.behavior in BASELINES:
             from layerpilot.sim import baselines
 
@@ -94,15 +95,14 @@ class _Pilot:
                 wps = baselines.lawnmower((0.0, 0.0), radius, self.altitude, camera, self.altitude)
             else:
                 wps = baselines.orbit((0.0, 0.0), radius, self.altitude)
-            self.script = list(wps)
+            self.script = wps
         self.maker = None if self.script is not None else DecisionMaker(self.behavior, (0.0, 0.0), seed=cfg.seed)
 
-    def next(self, layers_fn, position: np.ndarray, t: float) -> tuple[np.ndarray, float | None, dict] | None:
-        """(waypoint xyz, yaw, record) or None when a script is done."""
+    def next(self, layers_fn, position: np.ndarray, t: float) -> tuple[np.ndarray, float, dict]:
+        """(waypoint xyz, yaw, record); a script starts over when it is done, as a patrol would."""
         if self.script is not None:
-            if not self.script:
-                return None
-            wp = self.script.pop(0)
+            wp = self.script[self._next % len(self.script)]
+            self._next += 1
             return wp[:3], float(wp[3]), {"time": t, "waypoint": wp[:3].tolist(), "scripted": True}
         decision = self.maker.decide(layers_fn(), position, t)
         wp = np.array(decision.waypoint, dtype=np.float64)
@@ -203,11 +203,9 @@ def run_mission(cfg: MissionConfig, run_dir: str | Path, progress_stream: TextIO
             while True:
                 position = sim.endpoint.pose().position.copy()
                 if target is None or np.linalg.norm(position - target) <= cfg.arrival_radius:
-                    choice = pilot.next(lambda: layer_set(t, position), position, t)
-                    if choice is not None:
-                        target, yaw, record = choice
-                        link.set_waypoint(*target, yaw=yaw)
-                        records.append(record)
+                    target, yaw, record = pilot.next(lambda: layer_set(t, position), position, t)
+                    link.set_waypoint(*target, yaw=yaw)
+                    records.append(record)
                 if t >= next_frame - 1e-9:
                     next_frame += 1.0 / cfg.frame_rate_hz
                     pose = sim.endpoint.pose()
