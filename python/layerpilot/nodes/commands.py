@@ -136,15 +136,19 @@ def _build(args, mission, tables, vehicle, session, from_dict):
         from layerpilot.nodes.link import LinkNodeConfig, LinkNode
 
         data = dict(tables.get("link", {}))
-        data["link"] = {**data.get("link", {}), "url": args.mavlink or mission.mavlink_url(vehicle)}
+        if args.mavlink or not mission.camera_only:  # camera-only: the real autopilot's URL from [link.link]
+            data["link"] = {**data.get("link", {}), "url": args.mavlink or mission.mavlink_url(vehicle)}
         node = LinkNode(session, vehicle, from_dict(LinkNodeConfig, data, "link"))
         node.start()
         return node, lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
                               "telemetry": node.link.telemetry().line()}, wait
-    from layerpilot.nodes.sim import SimNode
+    from layerpilot.nodes.sim import CameraOnlyNode, SimNode
     from layerpilot.sim.simulator import SimConfig
 
     data = dict(tables.get("sim", {}))
+    if mission.camera_only:
+        node = CameraOnlyNode(session, vehicle, from_dict(SimConfig, data, "sim"))
+        return node, lambda: {"frames": node.frames, "rejected": node.rejects.total}, node.run
     data["urls"] = [args.mavlink or mission.mavlink_url(vehicle)]
     node = SimNode(session, vehicle, from_dict(SimConfig, data, "sim"), speed=mission.speed)
     return node, lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, node.run

@@ -20,6 +20,7 @@ class Mission:
     description: str = ""
     vehicles: list[str] = field(default_factory=lambda: ["uav1"])
     speed: float = 1.0  # simulator pace (x real time)
+    camera_only: bool = False  # the vehicle is a real autopilot (SITL) at [link.link].url; sim only renders
     mavlink_port: int = 5760  # vehicle i's simulator serves MAVLink on tcp:127.0.0.1:<mavlink_port + 10 i>
     bus: dict[str, Any] = field(default_factory=dict)
     map_server: dict[str, Any] = field(default_factory=dict)

@@ -4,14 +4,27 @@ the simulated multicopter serves MAVLink on the configured URLs for the link nod
 from __future__ import annotations
 
 import logging
+import math
 import threading
 
+import numpy as np
 import zenoh
 
 from layerpilot.bus import keys
-from layerpilot.bus.messages import Frame, encode_frame, quat_from_matrix
+from layerpilot.bus.guard import guarded
+from layerpilot.bus.messages import Frame, State, decode_state, encode_frame, quat_from_matrix
+from layerpilot.bus.reject import Rejects
+from layerpilot.nodes.queue import DropOldest
 
 _log = logging.getLogger("layerpilot.sim")
+
+
+def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, rendered, with_depth: bool) -> None:
+    """Put a rendered view (``layerpilot.sim.render.Frame``) on the vehicle's camera key."""
+    K = rendered.K
+    session.put(k.camera, encode_frame(Frame(
+        stamp, k.vehicle, seq, rendered.color, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), rendered.pose.centre,
+        quat_from_matrix(rendered.pose.rotation), rendered.depth if with_depth else None)))
 
 
 class SimNode:
@@ -26,11 +39,8 @@ class SimNode:
         self.frames = 0
 
     def _on_frame(self, stamp: float, rendered) -> None:
-        fx, fy, cx, cy = rendered.K[0, 0], rendered.K[1, 1], rendered.K[0, 2], rendered.K[1, 2]
         self.frames += 1
-        self.session.put(self.keys.camera, encode_frame(Frame(
-            stamp, self.keys.vehicle, self.frames, rendered.color, (fx, fy, cx, cy), rendered.pose.centre,
-            quat_from_matrix(rendered.pose.rotation), rendered.depth if self.publish_depth else None)))
+        publish_frame(self.session, self.keys, self.frames, stamp, rendered, self.publish_depth)
 
     def run(self, stop: threading.Event) -> None:
         """Step the simulator paced to the wall clock until ``stop`` (SIGTERM) is set."""
@@ -38,3 +48,47 @@ class SimNode:
             self.sim.run(self._on_frame, speed=self.speed, stop=stop)
         finally:
             self.sim.close()
+
+
+def yaw_of(q: np.ndarray) -> float:
+    """ENU yaw (rad) of a body -> map quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+class CameraOnlyNode:
+    """Camera-only simulation: render layerpilot's world from the pose a real autopilot reports.
+
+    The vehicle is someone else's (ArduPilot or PX4 SITL, flown by the link node); this node
+    subscribes to its pose and publishes what the simulated camera would see, at most
+    ``frame_rate_hz`` frames per mission second, like AirSim next to PX4/ArduPilot.
+    """
+
+    def __init__(self, session: zenoh.Session, vehicle: str, sim_config) -> None:
+        self.session, self.keys, self.config = session, keys.Keys(vehicle), sim_config
+        self.rejects = Rejects(_log)
+        self.queue: DropOldest[State] = DropOldest(1)  # only the newest pose matters
+        self.frames = 0
+        self._next = -math.inf
+        self._sub = None
+
+    def run(self, stop: threading.Event) -> None:
+        """Render poses until ``stop``; the GL context belongs to the calling thread, so it is made here."""
+        from layerpilot.sim.render import Renderer
+        from layerpilot.sim.world import World
+
+        renderer = Renderer(World(self.config.world), self.config.camera)
+        self._sub = self.session.declare_subscriber(
+            self.keys.pose, guarded(decode_state, lambda s, k: self.queue.put(s), self.rejects))
+        threading.Thread(target=lambda: (stop.wait(), self.queue.close()), daemon=True).start()
+        try:
+            while (state := self.queue.get()) is not None:
+                if state.stamp < self._next:
+                    continue
+                self._next = state.stamp + 1.0 / self.config.frame_rate_hz
+                rendered = renderer.render_vehicle(state.position, yaw_of(state.orientation))
+                self.frames += 1
+                publish_frame(self.session, self.keys, self.frames, state.stamp, rendered, True)
+        finally:
+            self._sub.undeclare()
+            renderer.close()
