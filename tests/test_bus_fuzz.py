@@ -6,10 +6,11 @@ import time
 
 import numpy as np
 import pytest
+import zenoh
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
-from layerpilot.bus.layerset import LayerSet, decode_layer_set, encode_layer_set
+from layerpilot.bus.layerset import LayerSet, decode_layer_set, encode_layer_set, to_column_layers
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
@@ -103,12 +104,13 @@ def test_map_server_survives_thousands_of_bad_clouds():
         key = Keys("uav1").cloud
         bad = [p for p in mutations(GOOD[msg.decode_cloud], 3000)]
         expected_rejects = 0
+        pub = client.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)  # lose nothing
         for p in bad:
             try:
                 msg.decode_cloud(p)
             except BadMessage:
                 expected_rejects += 1
-            client.put(key, p)
+            pub.put(p)
         client.put(key, GOOD[msg.decode_cloud])
         end = time.monotonic() + 60
         while server.rejects.total < expected_rejects and time.monotonic() < end:
@@ -123,3 +125,51 @@ def test_map_server_survives_thousands_of_bad_clouds():
         server.stop()
         client.close()
         server_session.close()
+
+
+def test_decide_and_depth_nodes_survive_thousands_of_bad_messages():
+    from layerpilot.nodes.decide import DecideConfig, DecideNode
+    from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
+
+    ep = free_endpoint()
+    node_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
+    decide = DecideNode(node_session, "uav1", DecideConfig())
+    depth = DepthNode(node_session, "uav1", DepthNodeConfig(source="ground_truth"))
+    decide.start()
+    depth.start()
+    try:
+        time.sleep(0.5)
+        k = Keys("uav1")
+        expected = {}
+        layers_ok = lambda p: to_column_layers(decode_layer_set(p))  # noqa: E731 - what decide accepts
+        for key, good, decode in ((k.layers, GOOD[decode_layer_set], layers_ok), (k.pose, GOOD[msg.decode_state], msg.decode_state),
+                                  (k.camera, GOOD[msg.decode_frame], msg.decode_frame),
+                                  ("layerpilot/uav2/decision", GOOD[msg.decode_decision], msg.decode_decision)):
+            bad = []
+            for p in mutations(good, 1000):
+                try:
+                    decode(p)
+                except BadMessage:
+                    bad.append(p)
+            pub = client.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)  # lose nothing
+            for p in bad:
+                pub.put(p)
+            pub.undeclare()
+            expected[key] = len(bad)
+        want_decide = expected[k.layers] + expected[k.pose] + expected["layerpilot/uav2/decision"]
+        end = time.monotonic() + 60
+        while (decide.rejects.total < want_decide or depth.rejects.total < expected[k.camera]) and time.monotonic() < end:
+            time.sleep(0.05)
+        time.sleep(0.5)  # nothing more may arrive
+        assert decide.rejects.total == want_decide and depth.rejects.total == expected[k.camera]
+        assert want_decide > 2000
+        # still working: a good frame with depth becomes a cloud
+        client.put(k.camera, GOOD[msg.decode_frame])
+        while depth.clouds < 1 and time.monotonic() < end:
+            time.sleep(0.05)
+        assert depth.clouds == 1
+    finally:
+        decide.stop()
+        depth.stop()
+        client.close()
+        node_session.close()
