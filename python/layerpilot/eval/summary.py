@@ -83,6 +83,15 @@ def _final(run_dir: Path) -> dict[str, float]:
     return {k: float("nan") if v is None else float(v) for k, v in final.items()}
 
 
+def _run_rows(dirs: Mapping[str, Sequence[Path]]) -> list[list[Any]]:
+    rows = []
+    for ds in dirs.values():
+        for d in ds:
+            s = json.loads((d / "metrics.json").read_text())["settings"]
+            rows.append([d.name] + [s.get(k, "–") for k in ("frames", "clouds", "waypoints", "wall_s")])
+    return rows
+
+
 def write_study_report(
     out_dir: str | os.PathLike, runs: Mapping[str, Sequence[str | os.PathLike]], settings: Mapping[str, Any]
 ) -> dict[str, Path]:
@@ -100,6 +109,11 @@ def write_study_report(
     report.table(["behavior"] + TABLE1_HEADERS, study_table(finals, TABLE1))
     report.heading("Standard 3D metrics at d_v = 4 m")
     report.table(["behavior", "precision", "recall (completeness)", "F-score"], study_table(finals, STANDARD_3D))
+    report.heading("Runs")
+    report.text("Stereo clouds: camera frames that found a usable stereo partner and reached the map; "
+                "a behavior whose motion the picker rejects (e.g. flying straight along the camera's axis) "
+                "maps little whatever its path.")
+    report.table(["run", "frames", "stereo clouds", "waypoints", "wall (s)"], _run_rows(dirs))
     report.heading("Settings")
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
