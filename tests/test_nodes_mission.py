@@ -1,5 +1,6 @@
-"""The whole loop as processes on loopback: sim -> depth -> map-server -> decide -> link -> sim,
-started by `layerpilot up`; the map server is killed with SIGKILL mid-mission and must come back."""
+"""The whole loop as processes on loopback: sim -> depth -> map-server -> decide -> link -> sim for two
+drones sharing one map server, started by `layerpilot up`; the map server is killed with SIGKILL
+mid-mission and must come back from its snapshot."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 
 K = Keys("uav1")
+K2 = Keys("uav2")
 
 
 def free_tcp_port() -> int:
@@ -38,7 +40,7 @@ def test_mission_flies_and_survives_map_server_kill(tmp_path):
     ep = free_endpoint()
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
-vehicles = ["uav1"]
+vehicles = ["uav1", "uav2"]
 speed = 3.0
 mavlink_port = {free_tcp_port()}
 [map_server]
@@ -72,10 +74,20 @@ height = 120
         layer_stamps: list[float] = []
         waypoints: list[msg.Waypoint] = []
         poses: list[msg.State] = []
+        waypoints2: list[msg.Waypoint] = []
+        arrivals: list[msg.Waypoint] = []  # both drones' waypoints in the order they were heard
+        lock = threading.Lock()
+
+        def on_waypoint(into: list, sample) -> None:
+            w = msg.decode_waypoint(sample.payload.to_bytes())
+            with lock:
+                into.append(w)
+                arrivals.append(w)
         subs = [
             client.declare_subscriber(K.layers, lambda s: layer_stamps.append(decode_layer_set(s.payload.to_bytes()).stamp)),
-            client.declare_subscriber(K.waypoint, lambda s: waypoints.append(msg.decode_waypoint(s.payload.to_bytes()))),
+            client.declare_subscriber(K.waypoint, lambda s: on_waypoint(waypoints, s)),
             client.declare_subscriber(K.pose, lambda s: poses.append(msg.decode_state(s.payload.to_bytes()))),
+            client.declare_subscriber(K2.waypoint, lambda s: on_waypoint(waypoints2, s)),
         ]
 
         def wait_for(cond, what, timeout=90.0):
@@ -116,6 +128,19 @@ height = 120
         wall = poses[-1].stamp - poses[0].stamp
         assert len(layer_stamps) >= 0.75 * 2.0 * wall - 4, (len(layer_stamps), wall)
         assert t_kill < 60.0
+
+        # the second drone flew too, into the same map, never towards the first one's current target
+        assert len({w.seq for w in waypoints2}) >= 3
+        target1, checked, seen2 = None, 0, set()
+        for w in arrivals:
+            if w.vehicle == "uav1":
+                target1 = w
+            elif w.seq not in seen2:  # a fresh decision of uav2 (repeats are the same target)
+                seen2.add(w.seq)
+                if target1 is not None:
+                    assert np.hypot(*(w.position[:2] - target1.position[:2])) >= 10.0 - 1e-6  # r_e of balanced
+                    checked += 1
+        assert checked >= 2
         for s in subs:
             s.undeclare()
     finally:
@@ -129,4 +154,5 @@ height = 120
                 os.killpg(up.pid, signal.SIGKILL)
                 up.wait()
     assert up.returncode == 0
-    assert "stopped map-server (0), sim/uav1 (0), link/uav1 (0), depth/uav1 (0), decide/uav1 (0)" in "".join(lines)
+    assert ("stopped map-server (0), sim/uav1 (0), link/uav1 (0), depth/uav1 (0), decide/uav1 (0), "
+            "sim/uav2 (0), link/uav2 (0), depth/uav2 (0), decide/uav2 (0)") in "".join(lines)
