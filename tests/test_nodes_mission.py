@@ -63,7 +63,7 @@ width = 160
 height = 120
 """)
     up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission), "--endpoint", ep,
-                           "--status-every", "1"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           "--status-every", "1", "--log-dir", str(tmp_path / "logs")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                           start_new_session=True)
     lines: list[str] = []
     threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
@@ -153,6 +153,8 @@ height = 120
             except subprocess.TimeoutExpired:
                 os.killpg(up.pid, signal.SIGKILL)
                 up.wait()
-    assert up.returncode == 0
+    assert up.returncode == 0, "".join(lines[-20:])
+    logs = {p.name: p.read_text() for p in (tmp_path / "logs").glob("*.log")}
+    assert not [n for n, text in logs.items() if "Thread 0x" in text], logs  # no node hung on the way out
     assert ("stopped map-server (0), sim/uav1 (0), link/uav1 (0), depth/uav1 (0), decide/uav1 (0), "
             "sim/uav2 (0), link/uav2 (0), depth/uav2 (0), decide/uav2 (0)") in "".join(lines)

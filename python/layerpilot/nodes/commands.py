@@ -44,6 +44,7 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     p.add_argument("--endpoint", help="Zenoh endpoint the nodes meet at (default: the mission's)")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between status blocks")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
     p.set_defaults(func=_up)
 
     b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
@@ -170,7 +171,8 @@ def _router(args: argparse.Namespace) -> int:
 def _up(args: argparse.Namespace) -> int:
     from layerpilot.nodes.up import up
 
-    return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration)
+    return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
+              log_dir=args.log_dir)
 
 
 def _bench_bus(args: argparse.Namespace) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import faulthandler
 import logging
 import signal
 import threading
@@ -25,12 +26,20 @@ def bus_config(tables: dict[str, Any], endpoint: str | None, mode: str | None = 
     return from_dict(BusConfig, data, "bus")
 
 
+STUCK_AFTER = 10.0  # s after SIGTERM: dump every thread's stack to stderr
+
+
 def stop_event() -> threading.Event:
     """An event set by SIGTERM or SIGINT: the node finishes its current message, then exits."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     stop = threading.Event()
+
+    def on_signal(*_: object) -> None:
+        stop.set()
+        faulthandler.dump_traceback_later(STUCK_AFTER, exit=False)  # if stopping hangs, the log says where
+
     for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, on_signal)
     return stop
 
 

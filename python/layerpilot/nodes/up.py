@@ -33,9 +33,11 @@ class NodeProcess:
     started: float = 0.0
     exit_codes: list[int] = field(default_factory=list)
 
-    def start(self) -> None:
-        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                     start_new_session=True)  # Ctrl-C reaches `up` only; `up` stops the nodes
+    def start(self, log_dir: Path) -> None:
+        log_dir.mkdir(parents=True, exist_ok=True)
+        with open(log_dir / (self.name.replace("/", "-") + ".log"), "a") as log:
+            self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=log, text=True,
+                                         start_new_session=True)  # Ctrl-C reaches `up` only; `up` stops the nodes
         self.started = time.monotonic()
         threading.Thread(target=self._read, args=(self.proc,), daemon=True).start()
 
@@ -68,13 +70,14 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None)
 
 
 class Supervisor:
-    def __init__(self, nodes: list[NodeProcess]) -> None:
+    def __init__(self, nodes: list[NodeProcess], log_dir: Path) -> None:
         self.nodes = nodes
+        self.log_dir = log_dir
         self.stopping = threading.Event()
 
     def start(self) -> None:
         for n in self.nodes:
-            n.start()
+            n.start(self.log_dir)
 
     def check(self) -> list[str]:
         """Restart every node that died (after RESTART_DELAY); returns what happened."""
@@ -87,7 +90,7 @@ class Supervisor:
                 n.exit_codes.append(code)
                 n.restarts += 1
                 events.append(f"{n.name} exited with {code}; restarting")
-                n.start()
+                n.start(self.log_dir)
         return events
 
     def stop(self) -> None:
@@ -108,7 +111,7 @@ class Supervisor:
 
 
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
-       duration: float | None = None) -> int:
+       duration: float | None = None, log_dir: str | Path = "runs/logs") -> int:
     from layerpilot.bus.session import open_session
     from layerpilot.nodes.runner import bus_config
 
@@ -118,9 +121,10 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     session = open_session(bus_config(tables, endpoint))  # the hub: holds the well-known endpoint
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint))
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint), Path(log_dir))
     sup.start()
-    print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}", flush=True)
+    print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
+          f"node logs in {log_dir}/", flush=True)
     t0 = time.monotonic()
     try:
         while not stop.wait(status_every):
