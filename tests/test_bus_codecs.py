@@ -134,3 +134,14 @@ def test_decode_rejects_with_reason():
         msg.decode_cloud(m.SerializeToString())
     with pytest.raises(BadMessage, match="missing field"):
         msg.decode_cloud(b"")
+
+
+def test_quaternion_matrix_round_trip():
+    from layerpilot.sim.camera import camera_pose
+
+    for yaw in np.linspace(-3, 3, 13):
+        for pitch in (-90.0, 0.0, 30.0, 60.0, 90.0):
+            R = camera_pose((0.0, 0.0, 0.0), yaw, pitch).rotation
+            q = msg.quat_from_matrix(R)
+            assert q[0] >= 0 and abs(np.linalg.norm(q) - 1) < 1e-12
+            np.testing.assert_allclose(msg.matrix_from_quat(q), R, atol=1e-12)

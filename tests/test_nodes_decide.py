@@ -58,7 +58,7 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         k1, k2 = Keys("uav1"), Keys("uav2")
         world.put(k1.layers, layer_payload("uav1"))
         world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", np.array([0.0, 0.0, 50.0]))))
-        wait_for(lambda: len(got["uav1"]) == 1, "uav1's first waypoint")
+        wait_for(lambda: len(got["uav1"]) >= 1, "uav1's first waypoint")
         w1 = got["uav1"][0]
         assert w1.seq == 1 and w1.position[2] == 50.0
         assert 10.0 <= np.hypot(*w1.position[:2]) <= 100.0  # outside r_e, inside the area of interest
@@ -71,16 +71,16 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         wait_for(lambda: "uav1" in nodes[1]._others, "uav2 hearing uav1's target")
         world.put(k2.layers, layer_payload("uav2"))
         world.put(k2.pose, msg.encode_state(msg.State(2.0, "uav2", np.array([0.0, 0.0, 50.0]))))
-        wait_for(lambda: len(got["uav2"]) == 1, "uav2's first waypoint")
+        wait_for(lambda: len(got["uav2"]) >= 1, "uav2's first waypoint")
         assert np.hypot(*(got["uav2"][0].position[:2] - w1.position[:2])) >= 10.0
 
         # no new decision while flying; a new one on arrival
         world.put(k1.pose, msg.encode_state(msg.State(3.0, "uav1", w1.position * [0.5, 0.5, 1])))
-        time.sleep(0.5)
-        assert len(got["uav1"]) == 1
+        time.sleep(1.5)
+        assert {w.seq for w in got["uav1"]} == {1} and len(got["uav1"]) >= 2  # the same waypoint, repeated
         world.put(k1.pose, msg.encode_state(msg.State(9.0, "uav1", w1.position + [1.0, 0, 0])))
-        wait_for(lambda: len(got["uav1"]) == 2, "uav1's second waypoint")
-        assert got["uav1"][1].seq == 2 and nodes[0].reached == 1
+        wait_for(lambda: got["uav1"][-1].seq == 2, "uav1's second waypoint")
+        assert nodes[0].reached == 1
         flown = np.hypot(*(0.5 * w1.position[:2])) + np.hypot(*(0.5 * w1.position[:2] + [1.0, 0]))
         assert nodes[0].distance_flown == pytest.approx(flown)
 

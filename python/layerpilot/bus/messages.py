@@ -71,6 +71,35 @@ def _set_quat(q: pb.Quaternion, wxyz: np.ndarray | tuple[float, ...]) -> None:
     q.w, q.x, q.y, q.z = (float(c) for c in np.asarray(wxyz, np.float64).reshape(4))
 
 
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """(w, x, y, z) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
+    R = np.asarray(R, np.float64)
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * math.sqrt(t + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 1e-300))
+        q = [0.0, 0.0, 0.0, 0.0]
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    q = np.array(q)
+    return q if q[0] >= 0 else -q
+
+
+def matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
 # --- point clouds ---------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -154,10 +183,10 @@ def decode_frame(payload: bytes) -> Frame:
     image = arrays.from_proto(m.image, "image", dtype="uint8", shape=(k.height, k.width, 3))
     depth = None
     if m.HasField("depth"):
-        # NaN depth means "no measurement" and is allowed; inf is not
+        # NaN / +inf depth means "no measurement" (sky); negative depth is impossible
         depth = arrays.from_proto(m.depth, "depth", dtype="float32", shape=(k.height, k.width))
-        if np.any(np.isinf(depth)):
-            raise BadMessage("not finite", "depth: contains inf")
+        if np.any(depth < 0):
+            raise BadMessage("out of range", "depth: negative values")
     intr = np.array([k.fx, k.fy, k.cx, k.cy])
     arrays.require_finite(intr, "intrinsics")
     if not (k.fx > 0 and k.fy > 0):
