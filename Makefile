@@ -10,7 +10,7 @@ SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*)
 .PHONY: demo test system build clean
 
 demo: build
-	$(VENV)/bin/layerpilot map scan ../shared/data/octomap/scan.dat.bz2 --out runs/scan-demo
+	$(VENV)/bin/layerpilot demo
 
 test: build
 	$(PY) -m pytest -q
