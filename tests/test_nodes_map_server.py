@@ -67,9 +67,11 @@ def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
     published = []
     sub = client.declare_subscriber(K.layers, lambda s: published.append(s.payload.to_bytes()))
     try:
-        time.sleep(0.5)  # let the subscriptions propagate
+        clouds = client.declare_publisher(K.cloud)
+        # Publish only once the server's subscription has reached the client, or puts are lost.
+        wait_for(lambda: clouds.matching_status.matching, "the map server's cloud subscription")
         for i in range(5):
-            client.put(K.cloud, msg.encode_cloud(ground_cloud(float(i + 1))))
+            clouds.put(msg.encode_cloud(ground_cloud(float(i + 1))))
         wait_for(lambda: server.counters.clouds_inserted == 5, "5 inserts")
         assert server.counters.points_inserted == 5 * 1600
 
