@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -14,3 +15,12 @@ OCTOMAP_DATA = SHARED / "data" / "octomap"
 def octomap_data() -> Path:
     assert (OCTOMAP_DATA / "scan.dat.bz2").is_file(), f"reference data missing: {OCTOMAP_DATA}"
     return OCTOMAP_DATA
+
+
+def wait_for(cond, what: str, timeout: float = 20.0) -> None:
+    """Poll ``cond`` until it holds; a bound on waiting for other threads/processes, not a speed check."""
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)

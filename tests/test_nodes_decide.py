@@ -13,14 +13,7 @@ from layerpilot.bus.layerset import LayerSet, column_arrays, encode_layer_set
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
 from layerpilot.nodes.decide import DecideConfig, DecideNode
-
-
-def wait_for(cond, what: str, timeout: float = 20.0) -> None:
-    end = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.02)
+from conftest import wait_for
 
 
 def layer_payload(vehicle: str) -> bytes:

@@ -20,16 +20,9 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
 from layerpilot.nodes.map_server import MapServer, MapServerConfig
+from conftest import wait_for
 
 K = Keys("uav1")
-
-
-def wait_for(cond, what: str, timeout: float = 20.0) -> None:
-    end = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.02)
 
 
 def ground_cloud(stamp: float, z: float = 0.0, n: int = 40) -> msg.Cloud:
