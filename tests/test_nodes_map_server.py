@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zenoh
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
@@ -60,7 +61,7 @@ def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
     published = []
     sub = client.declare_subscriber(K.layers, lambda s: published.append(s.payload.to_bytes()))
     try:
-        clouds = client.declare_publisher(K.cloud)
+        clouds = client.declare_publisher(K.cloud, congestion_control=zenoh.CongestionControl.BLOCK)
         # Publish only once the server's subscription has reached the client, or puts are lost.
         wait_for(lambda: clouds.matching_status.matching, "the map server's cloud subscription")
         for i in range(5):

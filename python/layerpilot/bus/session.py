@@ -19,6 +19,10 @@ import zenoh
 from layerpilot.config import ConfigError
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+# Topics whose every message matters (a lost cloud is a hole in the map, a lost waypoint a stalled
+# drone): the transport blocks instead of dropping when its queue is full. Camera frames and poses
+# are streams where only the newest counts, so they keep Zenoh's default (drop).
+LOSSLESS_TOPICS = ("cloud", "layers", "decision", "waypoint", "state")
 _log = logging.getLogger("layerpilot.bus")
 
 
@@ -72,6 +76,12 @@ def open_session(cfg: BusConfig | None = None) -> zenoh.Session:
     host = cfg.endpoint.rsplit(":", 1)[0]
     _log.debug("%s is taken: listening on a free port and connecting to it", cfg.endpoint)
     return zenoh.open(zenoh_config(cfg, listen=[f"{host}:0", *cfg.listen], connect=[cfg.endpoint, *cfg.connect]))
+
+
+def publish(session: zenoh.Session, key: str, payload: bytes) -> None:
+    """Put ``payload`` on ``key`` with the congestion control its topic needs (see LOSSLESS_TOPICS)."""
+    lossless = key.rsplit("/", 1)[-1] in LOSSLESS_TOPICS
+    session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK if lossless else None)
 
 
 def free_endpoint() -> str:

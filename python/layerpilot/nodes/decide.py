@@ -23,6 +23,7 @@ from layerpilot.bus.layerset import decode_layer_set, to_column_layers
 from layerpilot.bus.messages import (Decision, MissionState, State, Term, Waypoint, decode_decision, decode_state,
                                      encode_decision, encode_mission_state, encode_waypoint)
 from layerpilot.bus.reject import BadMessage, Rejects
+from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.decide.behavior import load_behavior
 from layerpilot.decide.maker import DecisionMaker
@@ -114,7 +115,7 @@ class DecideNode:
                 if not self._due():
                     repeat = self._waypoint_msg
                     if repeat is not None:  # a link that started (or restarted) late still gets its target
-                        self.session.put(self.keys.waypoint, repeat)
+                        publish(self.session, self.keys.waypoint, repeat)
                     continue
                 ls, state, avoid = self._layers, self._state, list(self._others.values())
             try:
@@ -151,10 +152,10 @@ class DecideNode:
         terms += (Term("zone", 1.0, d.zone, d.zone), Term("preference", 1.0, d.preference, d.preference),
                   Term("history", 1.0, d.history, d.history))
         v = self.keys.vehicle
-        self.session.put(self.keys.decision, encode_decision(
+        publish(self.session, self.keys.decision, encode_decision(
             Decision(state.stamp, v, self.seq, wp, d.score, terms, self.behavior.name)))
         self._waypoint_msg = encode_waypoint(Waypoint(state.stamp, v, self.seq, wp, speed=self.cfg.speed))
-        self.session.put(self.keys.waypoint, self._waypoint_msg)
-        self.session.put(self.keys.state, encode_mission_state(MissionState(
+        publish(self.session, self.keys.waypoint, self._waypoint_msg)
+        publish(self.session, self.keys.state, encode_mission_state(MissionState(
             state.stamp, v, "survey", self.seq, self.reached, self.distance_flown, wp)))
         _log.info("%s", d.explain())

@@ -14,6 +14,7 @@ from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
 from layerpilot.bus.messages import Cloud, Frame, decode_frame, encode_cloud, matrix_from_quat
 from layerpilot.bus.reject import BadMessage, Rejects
+from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.depth.frames import Frame as DepthFrame
 from layerpilot.nodes.queue import DropOldest
@@ -83,6 +84,6 @@ class DepthNode:
             if cloud is None or len(cloud) == 0:
                 continue
             self.clouds += 1
-            self.session.put(self.keys.cloud, encode_cloud(Cloud(
+            publish(self.session, self.keys.cloud, encode_cloud(Cloud(
                 cloud.stamp, self.keys.vehicle, frame.seq, cloud.points, cloud.origin, cloud.colors,
                 self.cfg.max_depth)))

@@ -21,6 +21,7 @@ from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
 from layerpilot.bus.messages import State, Waypoint, decode_waypoint, encode_state
 from layerpilot.bus.reject import BadMessage, Rejects
+from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, LinkError
@@ -92,7 +93,7 @@ class LinkNode:
             if not t.link_ok:
                 continue
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
-            self.session.put(self.keys.pose, encode_state(State(
+            publish(self.session, self.keys.pose, encode_state(State(
                 t.time, self.keys.vehicle, t.position, quat_from_euler(t.roll, t.pitch, t.yaw), t.velocity,
                 t.armed, t.mode, battery)))
 

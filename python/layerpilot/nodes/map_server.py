@@ -26,6 +26,7 @@ from layerpilot.bus.layerset import COLUMN_ENCODINGS, LayerSet, column_arrays, e
 from layerpilot.bus.messages import Cloud, decode_cloud
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
+from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.map import VoxelMap
 
@@ -178,7 +179,7 @@ class MapServer:
                 vehicles = sorted(self.counters.vehicles)
             for v in vehicles:
                 try:
-                    self.session.put(keys.Keys(v).layers, self.layer_set(v, x, y, w, h, self.cfg.layers))
+                    publish(self.session, keys.Keys(v).layers, self.layer_set(v, x, y, w, h, self.cfg.layers))
                     self.counters.layer_sets_published += 1
                 except ValueError as exc:  # e.g. the configured window does not fit in 1 MB
                     self.rejects.reject(keys.Keys(v).layers, BadMessage("publish failed", str(exc)))

@@ -14,6 +14,7 @@ from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
 from layerpilot.bus.messages import Frame, State, decode_state, encode_frame, quat_from_matrix
 from layerpilot.bus.reject import Rejects
+from layerpilot.bus.session import publish
 from layerpilot.nodes.queue import DropOldest
 
 _log = logging.getLogger("layerpilot.sim")
@@ -22,7 +23,7 @@ _log = logging.getLogger("layerpilot.sim")
 def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, rendered, with_depth: bool) -> None:
     """Put a rendered view (``layerpilot.sim.render.Frame``) on the vehicle's camera key."""
     K = rendered.K
-    session.put(k.camera, encode_frame(Frame(
+    publish(session, k.camera, encode_frame(Frame(
         stamp, k.vehicle, seq, rendered.color, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), rendered.pose.centre,
         quat_from_matrix(rendered.pose.rotation), rendered.depth if with_depth else None)))
 
