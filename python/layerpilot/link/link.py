@@ -104,6 +104,7 @@ class FlightLink:
         self._gps_fix = -1
         self._position_at = -math.inf
         self._pose_time = 0.0
+        self._boot_time = 0.0
         self._position = np.zeros(3)
         self._velocity = np.zeros(3)
         self._attitude = (0.0, 0.0, 0.0)
@@ -163,8 +164,8 @@ class FlightLink:
     def telemetry(self) -> Telemetry:
         with self._cond:
             roll, pitch, yaw = self._attitude
-            return Telemetry(self._pose_time, self._position.copy(), self._velocity.copy(), roll, pitch, yaw,
-                             self._armed, self._mode, self.flavour or "", self._battery[0], self._battery[1],
+            return Telemetry(self._pose_time, self._boot_time, self._position.copy(), self._velocity.copy(),
+                             roll, pitch, yaw, self._armed, self._mode, self.flavour or "", self._battery[0], self._battery[1],
                              self._link_ok, time.monotonic() - self._last_heartbeat,
                              None if self._home is None else self._home.copy(), self._paused)
 
@@ -294,6 +295,17 @@ class FlightLink:
         if not self._wait_arrival(target, timeout, use_setpoint=True):
             raise LinkError(f"goto: did not arrive at ({x:.1f}, {y:.1f}, {z:.1f}) within {timeout:.1f} s "
                             f"(now at {np.round(self._position, 1).tolist()})")
+
+    def set_speed(self, speed: float | None) -> None:
+        """Cruise at ``speed`` m/s over ground (DO_CHANGE_SPEED), or the autopilot's default for None.
+
+        A survey flies at the speed its camera rate allows (frames far enough apart for
+        stereo, close enough to overlap). ArduCopter applies it to GUIDED position targets;
+        PX4 ignores it in OFFBOARD, where MPC_XY_VEL_MAX rules.
+        """
+        if speed is not None and not (math.isfinite(speed) and speed > 0.0):
+            raise ValueError(f"speed: must be a positive number of m/s, got {speed}")
+        self.command(mav.MAV_CMD_DO_CHANGE_SPEED, 1.0, -2.0 if speed is None else float(speed), -1.0)
 
     def land(self, wait: bool = True, timeout: float = 180.0) -> None:
         """Land where the vehicle is (NAV_LAND); with ``wait``, until it has disarmed."""
@@ -515,6 +527,7 @@ class FlightLink:
                 self._position = np.array(ned_to_enu(msg.x, msg.y, msg.z))
                 self._velocity = np.array(ned_to_enu(msg.vx, msg.vy, msg.vz))
                 self._position_at, self._pose_time = time.monotonic(), self.clock()
+                self._boot_time = msg.time_boot_ms / 1000.0
             elif kind == "ATTITUDE":
                 self._attitude = attitude_ned_to_enu(msg.roll, msg.pitch, msg.yaw)
             elif kind == "SYS_STATUS":

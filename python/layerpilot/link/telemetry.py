@@ -11,11 +11,14 @@ import numpy as np
 class Telemetry:
     """A snapshot. Angles in radians: roll/pitch of body FLU, yaw counter-clockwise from east.
 
-    ``time`` is the mission clock when the pose arrived; ``heartbeat_age`` is wall
-    seconds since the autopilot's last HEARTBEAT; ``link_ok`` is False while lost.
+    ``time`` is the mission clock when the pose arrived; ``boot_time`` is the autopilot's
+    own clock in that pose (time_boot_ms, s), the one clock every process of a mission
+    shares; ``heartbeat_age`` is wall seconds since the autopilot's last HEARTBEAT;
+    ``link_ok`` is False while lost.
     """
 
     time: float
+    boot_time: float
     position: np.ndarray
     velocity: np.ndarray
     roll: float

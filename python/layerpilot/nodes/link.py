@@ -2,8 +2,9 @@
 
 At start it connects, waits until the autopilot is ready, takes control (GUIDED /
 OFFBOARD), arms and climbs to ``takeoff_altitude``; then every waypoint becomes a
-setpoint and the pose is published at ``pose_rate``. Pose stamps are the link's
-mission clock (seconds since the node started; the simulator's clock runs at the same pace).
+setpoint and the pose is published at ``pose_rate``. Pose stamps are the autopilot's
+clock (time_boot_ms): the simulator stamps its camera frames, and so the clouds and layer
+sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ class LinkNode:
                 continue
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
-                t.time, self.keys.vehicle, t.position, quat_from_euler(t.roll, t.pitch, t.yaw), t.velocity,
+                t.boot_time, self.keys.vehicle, t.position, quat_from_euler(t.roll, t.pitch, t.yaw), t.velocity,
                 t.armed, t.mode, battery)))
 
     def stop(self) -> None:
