@@ -86,6 +86,44 @@ def test_full_flight(vehicle, link):
     assert not [e for e in link.events if "rejected" in e or "lost" in e]
 
 
+def test_cruise_speed_is_set_and_reset(vehicle, link):
+    link.start_guided()
+    link.arm()
+    link.takeoff(10.0)
+
+    def fly(x: float) -> float:
+        """Top horizontal speed on the way to (x, 0, 12), sampled while the link flies there."""
+        speeds: list[float] = []
+        arrived = threading.Event()
+
+        def sample() -> None:
+            while not arrived.is_set():
+                speeds.append(float(np.hypot(*vehicle.pose().velocity[:2])))
+                time.sleep(0.01)
+
+        sampler = threading.Thread(target=sample)
+        sampler.start()
+        try:
+            link.goto(x, 0.0, 12.0)
+        finally:
+            arrived.set()
+            sampler.join()
+        return max(speeds)
+
+    link.set_speed(4.0)
+    assert vehicle.vehicle.cruise_speed == 4.0
+    assert 3.8 < fly(120.0) <= 4.0 + 1e-6
+    link.set_speed(None)
+    assert vehicle.vehicle.cruise_speed is None
+    assert fly(0.0) > 9.0  # back to the airframe's 10 m/s
+    link.set_speed(50.0)
+    assert vehicle.vehicle.cruise_speed == 10.0  # capped at the airframe's limit
+    with pytest.raises(ValueError, match="speed: must be a positive"):
+        link.set_speed(float("nan"))
+    with pytest.raises(CommandRejected, match="MAV_CMD_DO_CHANGE_SPEED rejected: MAV_RESULT_DENIED"):
+        link.command(mav.MAV_CMD_DO_CHANGE_SPEED, 1.0, -5.0, -1.0)
+
+
 def test_refusals_are_reported_with_the_mav_result_name(vehicle, link):
     with pytest.raises(CommandRejected, match="MAV_CMD_NAV_TAKEOFF rejected: MAV_RESULT_FAILED"):
         link.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 20)     # disarmed

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from layerpilot.sim.baselines import footprint_width, lawnmower, orbit, path_length
+from layerpilot.sim.baselines import footprint_width, lawnmower, orbit, path_length, survey_speed
 from layerpilot.sim.camera import CameraConfig, camera_pose
 
 
@@ -16,6 +16,15 @@ def test_footprint_width_of_default_camera():
     assert footprint_width(CameraConfig(), 30.0) == pytest.approx(69.282, abs=1e-3)
     with pytest.raises(ValueError, match="pitch_deg"):
         footprint_width(CameraConfig(pitch_deg=0.0), 30.0)
+
+
+def test_survey_speed_spaces_frames_by_the_stereo_baseline():
+    # 50 m above ground, 60 deg down: slant 57.74 m; 6 % of it per frame at 1 Hz, twice that at 2 Hz
+    assert survey_speed(CameraConfig(), 50.0, 1.0, 0.06) == pytest.approx(3.464, abs=1e-3)
+    assert survey_speed(CameraConfig(), 50.0, 2.0, 0.06) == pytest.approx(6.928, abs=1e-3)
+    assert survey_speed(CameraConfig(pitch_deg=90.0), 50.0, 1.0, 0.1) == pytest.approx(5.0)
+    with pytest.raises(ValueError, match="frame_rate_hz"):
+        survey_speed(CameraConfig(), 50.0, 0.0, 0.06)
 
 
 def test_lawnmower_lines_spacing_turns_and_coverage():

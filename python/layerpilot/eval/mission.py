@@ -86,13 +86,18 @@ class _Pilot:
         self.area = self.behavior.area
         self.altitude = self.behavior.altitude
         self.script: np.ndarray | None = None  # (N, 4) x, y, z, yaw; flown in a loop
+        self.cruise_speed: float | None = None  # m/s; None = the vehicle's top speed
         self._next = 0
         if cfg.behavior in BASELINES:
+            from layerpilot.depth.config import PickConfig
             from layerpilot.sim import baselines
 
             radius = self.area.radius
             if cfg.behavior == "lawnmower":
                 wps = baselines.lawnmower((0.0, 0.0), radius, self.altitude, camera, self.altitude)
+                # straight legs at top speed put frames too far apart for stereo: fly at survey speed
+                self.cruise_speed = baselines.survey_speed(camera, self.altitude, cfg.frame_rate_hz,
+                                                           PickConfig().target_baseline_ratio)
             else:
                 wps = baselines.orbit((0.0, 0.0), radius, self.altitude)
             self.script = wps
@@ -110,8 +115,8 @@ class _Pilot:
         return wp, yaw, {**decision.to_dict(), "explanation": decision.explain()}
 
 
-def _take_off(sim, link, altitude: float) -> None:
-    """Connect, arm and take off over MAVLink while the simulator steps in a background-paced loop."""
+def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
+    """Connect, arm, take off and set the cruise speed over MAVLink; the simulator steps meanwhile."""
     done = threading.Event()
     error: list[BaseException] = []
 
@@ -122,6 +127,8 @@ def _take_off(sim, link, altitude: float) -> None:
             link.start_guided()
             link.arm()
             link.takeoff(altitude - float(sim.vehicle.ground_z))
+            if cruise_speed is not None:
+                link.set_speed(cruise_speed)
         except BaseException as exc:  # reported in the mission thread
             error.append(exc)
         finally:
@@ -181,7 +188,7 @@ def run_mission(cfg: MissionConfig, run_dir: str | Path, progress_stream: TextIO
         # Heartbeats come at 1 Hz of mission time; a slow lock-step frame must not look like a lost link.
         link = FlightLink(LinkConfig(url=f"tcp:{host}:{port}", heartbeat_timeout_s=600.0))
         try:
-            _take_off(sim, link, pilot.altitude)
+            _take_off(sim, link, pilot.altitude, pilot.cruise_speed)
             hover = np.array([0.0, 0.0, pilot.altitude])
             link.set_waypoint(*hover, yaw=0.0)
             sim.endpoint.step(cfg.step_s)

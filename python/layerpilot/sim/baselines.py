@@ -41,6 +41,20 @@ def footprint_width(camera: CameraConfig, height_above_ground: float) -> float:
     return 2.0 * slant * math.tan(math.radians(camera.hfov_deg) / 2)
 
 
+def survey_speed(camera: CameraConfig, height_above_ground: float, frame_rate_hz: float,
+                 baseline_ratio: float) -> float:
+    """Ground speed (m/s) at which consecutive frames are ``baseline_ratio`` x the scene depth apart.
+
+    Survey planners derive speed from the trigger rate and the overlap they need; for
+    two-view stereo the need is a baseline, relative to the slant range to the ground
+    at the image centre. Faster, and frames are too far apart to pair; slower wastes time.
+    """
+    if not frame_rate_hz > 0 or not baseline_ratio > 0:
+        raise ValueError(f"frame_rate_hz and baseline_ratio must be > 0, got {frame_rate_hz}, {baseline_ratio}")
+    slant = height_above_ground / math.sin(math.radians(camera.pitch_deg))
+    return baseline_ratio * slant * frame_rate_hz
+
+
 def lawnmower(centre, radius: float, altitude: float, camera: CameraConfig, height_above_ground: float,
               side_overlap: float = 0.3, heading: float = 0.0) -> np.ndarray:
     """Parallel lines across the disc, spaced by the footprint width times (1 - side_overlap).

@@ -286,6 +286,8 @@ class MavlinkVehicle:
             return self._enter_mode("LAND")
         if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return self._enter_mode("RTL")
+        if c == mav.MAV_CMD_DO_CHANGE_SPEED:
+            return self._change_speed(msg.param2)
         if c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(int(msg.param1), msg.param2)
         if c == mav.MAV_CMD_REQUEST_MESSAGE:
@@ -293,6 +295,18 @@ class MavlinkVehicle:
         if c == mav.MAV_CMD_GET_HOME_POSITION:
             return self._send_now(mav.MAVLINK_MSG_ID_HOME_POSITION)
         return mav.MAV_RESULT_UNSUPPORTED
+
+    def _change_speed(self, speed: float) -> int:
+        """DO_CHANGE_SPEED: a horizontal cruise speed up to the airframe's limit; -1 no change, -2 default."""
+        if speed == -1.0:
+            return mav.MAV_RESULT_ACCEPTED
+        if speed == -2.0:
+            self.vehicle.cruise_speed = None
+            return mav.MAV_RESULT_ACCEPTED
+        if not math.isfinite(speed) or speed <= 0.0:
+            return mav.MAV_RESULT_DENIED
+        self.vehicle.cruise_speed = min(float(speed), self.vehicle.limits.max_speed_h)
+        return mav.MAV_RESULT_ACCEPTED
 
     def _prearm_ok(self) -> bool:
         return self.time >= self.config.prearm_delay_s

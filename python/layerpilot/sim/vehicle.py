@@ -62,6 +62,7 @@ class Multicopter:
     acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
     yaw_rate: float = 0.0
     motors_on: bool = False
+    cruise_speed: float | None = None  # m/s horizontal, set by DO_CHANGE_SPEED; None = max_speed_h
 
     def __post_init__(self) -> None:
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3).copy()
@@ -158,8 +159,9 @@ class Multicopter:
                 if speed > stop_speed:
                     desired[axes] *= stop_speed / speed
         horizontal = float(np.hypot(desired[0], desired[1]))
-        if horizontal > lim.max_speed_h:
-            desired[:2] *= lim.max_speed_h / horizontal
+        top = lim.max_speed_h if self.cruise_speed is None else min(self.cruise_speed, lim.max_speed_h)
+        if horizontal > top:
+            desired[:2] *= top / horizontal
         desired[2] = min(max(desired[2], -lim.max_speed_down), lim.max_speed_up)
         return desired
 
