@@ -252,6 +252,7 @@ def run_mission(cfg: MissionConfig, run_dir: str | Path, progress_stream: TextIO
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
     settings = {**asdict(cfg), "waypoints": len(records), "frames": frames, "clouds": clouds,
+                **{f"depth_{k}": v for k, v in estimator.stats().items()},  # why frames gave no cloud
                 "wall_s": round(time.monotonic() - wall0, 1)}
     paths = write_run_report(out, f"layerpilot mission: {cfg.behavior}", sampler.series,
                              est.column_layers_for(geometry), aoi, np.array(path).reshape(-1, 2), images, settings)
