@@ -5,7 +5,7 @@ APT_PACKAGES := g++ make cmake git python3 python3-venv python3-dev \
   libegl1 libegl-mesa0 libgl1-mesa-dri
 VENV := .venv
 PY := $(VENV)/bin/python
-SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*)
+SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*) $(wildcard config/*/*)
 
 .PHONY: demo test system build clean
 

@@ -106,3 +106,18 @@ def test_schedule_switches_the_decision(tmp_path: Path) -> None:
     observed[:] = True
     second = dm.decide(layers(observed), (0.0, 0.0), 10.0)
     assert second.waypoint[0] < -30 and second.weights == {"time": 1.0} and second.coverage == 1.0
+
+
+def test_presets_and_missions_are_installed_with_the_package():
+    """A wheel has no checkout: the build installs config/ beside the C++ module, where shipped_config looks."""
+    import filecmp
+
+    from layerpilot import _core
+
+    checkout = Path(__file__).resolve().parents[1] / "config"
+    installed = Path(_core.__file__).resolve().parent / "config"
+    for kind in ("behaviors", "missions"):
+        names = sorted(p.name for p in (checkout / kind).iterdir())
+        assert names and sorted(p.name for p in (installed / kind).iterdir()) == names
+        match, mismatch, errors = filecmp.cmpfiles(checkout / kind, installed / kind, names, shallow=False)
+        assert (mismatch, errors) == ([], [])

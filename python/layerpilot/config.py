@@ -21,6 +21,16 @@ class ConfigError(ValueError):
     """A configuration value or key is wrong; the message names it."""
 
 
+def shipped_config(kind: str) -> Path:
+    """``config/<kind>`` (behaviors, missions): the checkout's, else the copy a wheel installs beside ``_core``."""
+    checkout = Path(__file__).resolve().parents[2] / "config" / kind
+    if checkout.is_dir():
+        return checkout
+    from layerpilot import _core
+
+    return Path(_core.__file__).resolve().parent / "config" / kind
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     try:

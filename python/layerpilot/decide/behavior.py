@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from layerpilot.config import ConfigError, from_dict, load_toml
+from layerpilot.config import ConfigError, from_dict, load_toml, shipped_config
 from layerpilot.layers.registry import LayerOptions, layer_names, load_plugins
 
-PRESET_DIR = Path(__file__).resolve().parents[3] / "config" / "behaviors"
+PRESET_DIR = shipped_config("behaviors")
 
 
 def _positive(name: str, value: float) -> None:

@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from layerpilot.config import ConfigError, check_range, from_dict, load_toml
+from layerpilot.config import ConfigError, check_range, from_dict, load_toml, shipped_config
 
-MISSION_DIR = Path(__file__).resolve().parents[3] / "config" / "missions"
+MISSION_DIR = shipped_config("missions")
 
 
 @dataclass(frozen=True)
