@@ -10,11 +10,13 @@ import numpy as np
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.nodes.depth import to_depth_frame
 from layerpilot.nodes.link import quat_from_euler
 from layerpilot.nodes.sim import CameraOnlyNode, yaw_of
 from layerpilot.sim.camera import CameraConfig
 from layerpilot.sim.simulator import SimConfig
+from layerpilot.sim.world import World, WorldConfig
 
 K = Keys("uav1")
 
@@ -48,6 +50,15 @@ def test_camera_only_renders_from_reported_pose():
         forward = df.axis  # the camera looks 30 deg left of east, pitched down
         assert abs(np.degrees(np.arctan2(forward[1], forward[0])) - 30.0) < 1e-6 and forward[2] < 0
         assert np.isfinite(f.depth).mean() > 0.9  # sees the forest, not the sky
+        # The autopilot's frame has home on the ground; layerpilot's world is lifted to match, so what the
+        # camera sees, back in the published (autopilot) frame, lies on the world's terrain shifted by
+        # its height at home: never below it, and the ground pixels on it.
+        forest = World(WorldConfig())
+        lift = float(forest.terrain_height(0.0, 0.0))
+        pts = GroundTruthDepth().push(df).points.astype(np.float64)
+        above = pts[:, 2] - (forest.terrain_height(pts[:, 0], pts[:, 1]) - lift)
+        assert lift < -1.0 and np.quantile(above, 0.01) > -0.3  # would be 5.7 m below without the lift
+        assert np.mean(np.abs(above) < 0.3) > 0.05  # clearings: the terrain itself
     finally:
         stop.set()
         runner.join()

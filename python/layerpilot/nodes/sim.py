@@ -20,11 +20,16 @@ from layerpilot.nodes.queue import DropOldest
 _log = logging.getLogger("layerpilot.sim")
 
 
-def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, rendered, with_depth: bool) -> None:
-    """Put a rendered view (``layerpilot.sim.render.Frame``) on the vehicle's camera key."""
+def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, rendered, with_depth: bool,
+                  lift: float = 0.0) -> None:
+    """Put a rendered view (``layerpilot.sim.render.Frame``) on the vehicle's camera key.
+
+    ``lift``: metres the world's frame lies above the map frame (subtracted from the camera position).
+    """
     K = rendered.K
     publish(session, k.camera, encode_frame(Frame(
-        stamp, k.vehicle, seq, rendered.color, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), rendered.pose.centre,
+        stamp, k.vehicle, seq, rendered.color, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+        rendered.pose.centre - np.array([0.0, 0.0, lift]),
         quat_from_matrix(rendered.pose.rotation), rendered.depth if with_depth else None)))
 
 
@@ -63,6 +68,9 @@ class CameraOnlyNode:
     The vehicle is someone else's (ArduPilot or PX4 SITL, flown by the link node); this node
     subscribes to its pose and publishes what the simulated camera would see, at most
     ``frame_rate_hz`` frames per mission second, like AirSim next to PX4/ArduPilot.
+    A real autopilot's local frame has its origin at home, on the ground, so the pose is
+    rendered ``lift`` metres higher in layerpilot's world (its terrain height at the
+    origin) and the frames are published in the autopilot's frame, the mission's map frame.
     """
 
     def __init__(self, session: zenoh.Session, vehicle: str, sim_config) -> None:
@@ -78,7 +86,9 @@ class CameraOnlyNode:
         from layerpilot.sim.render import Renderer
         from layerpilot.sim.world import World
 
-        renderer = Renderer(World(self.config.world), self.config.camera)
+        world = World(self.config.world)
+        lift = float(world.terrain_height(0.0, 0.0))
+        renderer = Renderer(world, self.config.camera)
         self._sub = self.session.declare_subscriber(
             self.keys.pose, guarded(decode_state, lambda s, k: self.queue.put(s), self.rejects))
         threading.Thread(target=lambda: (stop.wait(), self.queue.close()), daemon=True).start()
@@ -87,9 +97,9 @@ class CameraOnlyNode:
                 if state.stamp < self._next:
                     continue
                 self._next = state.stamp + 1.0 / self.config.frame_rate_hz
-                rendered = renderer.render_vehicle(state.position, yaw_of(state.orientation))
+                rendered = renderer.render_vehicle(state.position + [0.0, 0.0, lift], yaw_of(state.orientation))
                 self.frames += 1
-                publish_frame(self.session, self.keys, self.frames, state.stamp, rendered, True)
+                publish_frame(self.session, self.keys, self.frames, state.stamp, rendered, True, lift)
         finally:
             self._sub.undeclare()
             renderer.close()
