@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,3 +29,24 @@ def wait_for(cond, what: str, timeout: float = 20.0) -> None:
         if time.monotonic() > end:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.02)
+
+
+def start_up(mission: Path, endpoint: str, log_dir: Path) -> tuple[subprocess.Popen, list[str]]:
+    """`layerpilot up` as a child process (its own process group) and the list its output lines go to."""
+    up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission),
+                           "--endpoint", endpoint, "--status-every", "1", "--log-dir", str(log_dir)],
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
+    return up, lines
+
+
+def stop_up(up: subprocess.Popen) -> None:
+    """SIGTERM, as Ctrl-C would; SIGKILL the whole group only if it is still there after 30 s."""
+    if up.poll() is None:
+        up.send_signal(signal.SIGTERM)
+        try:
+            up.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(up.pid, signal.SIGKILL)
+            up.wait()

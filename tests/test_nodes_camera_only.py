@@ -3,10 +3,6 @@ flat ground at z = 0, the way PX4/ArduPilot SITL reports it) while layerpilot's 
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 
@@ -19,6 +15,7 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.world import World, WorldConfig
+from conftest import start_up, stop_up
 
 K = Keys("uav1")
 
@@ -51,11 +48,7 @@ frame_rate_hz = 2.0
 width = 160
 height = 120
 """)
-    up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission), "--endpoint", ep,
-                           "--status-every", "1", "--log-dir", str(tmp_path / "logs")],
-                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    lines: list[str] = []
-    threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
+    up, lines = start_up(mission, ep, tmp_path / "logs")
     client = open_session(BusConfig(endpoint=ep))
     frames: list[msg.Frame] = []
     waypoints: list[msg.Waypoint] = []
@@ -101,12 +94,6 @@ height = 120
         for s in subs:
             s.undeclare()
         client.close()
-        if up.poll() is None:
-            up.send_signal(signal.SIGTERM)
-            try:
-                up.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(up.pid, signal.SIGKILL)
-                up.wait()
+        stop_up(up)
         sitl.stop()
     assert up.returncode == 0, "".join(lines[-20:])

@@ -8,8 +8,6 @@ import os
 import re
 import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
 
@@ -20,6 +18,7 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from conftest import start_up, stop_up
 
 K = Keys("uav1")
 K2 = Keys("uav2")
@@ -62,11 +61,7 @@ frame_rate_hz = 2.0
 width = 160
 height = 120
 """)
-    up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission), "--endpoint", ep,
-                           "--status-every", "1", "--log-dir", str(tmp_path / "logs")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                          start_new_session=True)
-    lines: list[str] = []
-    threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
+    up, lines = start_up(mission, ep, tmp_path / "logs")
     client = None
     try:
         time.sleep(1.0)
@@ -151,13 +146,7 @@ height = 120
     finally:
         if client is not None:
             client.close()
-        if up.poll() is None:
-            up.send_signal(signal.SIGTERM)
-            try:
-                up.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(up.pid, signal.SIGKILL)
-                up.wait()
+        stop_up(up)
     assert up.returncode == 0, "".join(lines[-20:])
     logs = {p.name: p.read_text() for p in (tmp_path / "logs").glob("*.log")}
     assert not [n for n, text in logs.items() if "Thread 0x" in text], logs  # no node hung on the way out
