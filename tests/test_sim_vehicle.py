@@ -243,6 +243,8 @@ def test_guided_flight_with_type_masks_land_and_rtl(bench):
                                                           int(round(lon * 1e7)), 18.0, 0, 0, 0, 0, 0, 0, 0, 0)
     bench.run(20.0)
     assert np.allclose(bench.endpoint.pose().position, (-20.0, 30.0, 22.0), atol=0.05)
+    # no yaw given: like ArduCopter (WP_YAW_BEHAVIOR 2) it turned to face the destination on the way
+    assert bench.endpoint.pose().yaw == pytest.approx(math.atan2(30.0 - 10.0, -20.0 - x_stop), abs=0.02)
     assert bench.command(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH) == mav.MAV_RESULT_ACCEPTED
     bench.run(3.0)   # above RTL_ALT already: returns at its altitude, then lands at home
     pose = bench.endpoint.pose()

@@ -47,6 +47,7 @@ VEL_IGNORE = 0b111000
 YAW_IGNORE = 1024
 YAW_RATE_IGNORE = 2048
 GUIDED_VELOCITY_TIMEOUT_S = 3.0  # ArduCopter stops a velocity-only guided command after 3 s
+LOOK_AT_MIN_DISTANCE_M = 2.0  # ArduCopter turns toward a guided destination only while farther than this
 
 # Default telemetry intervals (mission seconds), roughly ArduPilot's SRx_ defaults for a GCS link.
 DEFAULT_INTERVALS = {
@@ -421,6 +422,8 @@ class MavlinkVehicle:
             return
         yaw = None if mask & YAW_IGNORE else yaw_ned_to_enu(msg.yaw)
         if mask & POS_IGNORE != POS_IGNORE:
+            if yaw is None and mask & YAW_RATE_IGNORE and self.flavour == modes.ARDUPILOT:
+                yaw = self._look_at(position)
             self.vehicle.set_position_target(*position, yaw=yaw)
             self._velocity_deadline = None
             self._airborne = self._airborne or position[2] > self.vehicle.ground_z + 0.2
@@ -432,6 +435,11 @@ class MavlinkVehicle:
             self.vehicle.set_yaw_target(yaw=yaw)
         if yaw is None and not mask & YAW_RATE_IGNORE:
             self.vehicle.set_yaw_target(yaw_rate=-msg.yaw_rate)
+
+    def _look_at(self, position) -> float | None:
+        """ArduCopter's default WP_YAW_BEHAVIOR (2): face the destination while it is more than 2 m away."""
+        dx, dy = position[0] - self.vehicle.position[0], position[1] - self.vehicle.position[1]
+        return math.atan2(dy, dx) if math.hypot(dx, dy) > LOOK_AT_MIN_DISTANCE_M else None
 
     def _local_target(self, msg: mav.MAVLink_message) -> tuple[tuple | None, tuple | None]:
         frame = msg.coordinate_frame
