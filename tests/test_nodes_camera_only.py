@@ -54,7 +54,8 @@ height = 120
     waypoints: list[msg.Waypoint] = []
     layer_sets: list[bytes] = []
     subs = [client.declare_subscriber(K.camera, lambda s: frames.append(msg.decode_frame(s.payload.to_bytes()))),
-            client.declare_subscriber(K.waypoint, lambda s: waypoints.append(msg.decode_waypoint(s.payload.to_bytes()))),
+            client.declare_subscriber(K.waypoint,
+                                      lambda s: waypoints.append(msg.decode_waypoint(s.payload.to_bytes()))),
             client.declare_subscriber(K.layers, lambda s: layer_sets.append(s.payload.to_bytes()))]
     track_xy: list[np.ndarray] = []
     done = threading.Event()

@@ -165,7 +165,8 @@ class FlightLink:
         with self._cond:
             roll, pitch, yaw = self._attitude
             return Telemetry(self._pose_time, self._boot_time, self._position.copy(), self._velocity.copy(),
-                             roll, pitch, yaw, self._armed, self._mode, self.flavour or "", self._battery[0], self._battery[1],
+                             roll, pitch, yaw, self._armed, self._mode, self.flavour or "",
+                             self._battery[0], self._battery[1],
                              self._link_ok, time.monotonic() - self._last_heartbeat,
                              None if self._home is None else self._home.copy(), self._paused)
 
