@@ -1,9 +1,11 @@
-"""Depth commands: `layerpilot depth preview`, `layerpilot bench depth`."""
+"""Depth commands: `layerpilot depth` (the depth node), `layerpilot depth preview`, `layerpilot bench depth`."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+
+from layerpilot.nodes.commands import add_node_command
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -17,8 +19,9 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = commands.add_parser("depth", help="stereo depth from the moving camera")
-    sub = p.add_subparsers(dest="depth_command", required=True, metavar="ACTION")
+    p = add_node_command(commands, "depth", "depth from the moving camera: the depth node (camera frames in, "
+                         "point clouds out), or an action (preview)")
+    sub = p.add_subparsers(dest="depth_command", metavar="ACTION")
     prev = sub.add_parser("preview", help="PNG panel of one rendered pair: rectified views, disparity, depth, error")
     prev.add_argument("--out", type=Path, default=Path("runs/depth_preview.png"))
     prev.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")

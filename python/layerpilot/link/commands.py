@@ -1,19 +1,27 @@
-"""`layerpilot link --mavlink URL goto X Y Z | takeoff ALT | land`: bench tests on a real autopilot or SITL."""
+"""`layerpilot link`: the link node, or one action for bench tests on a real autopilot or SITL
+(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`)."""
 
 from __future__ import annotations
 
 import argparse
+from typing import Any
+
+from layerpilot.nodes.commands import add_node_command
 
 
 def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = commands.add_parser("link", help="fly the vehicle over MAVLink (ArduPilot GUIDED, PX4 OFFBOARD)")
-    p.add_argument("--mavlink", default="tcp:127.0.0.1:5760", metavar="URL",
-                   help="tcp:HOST:PORT (ArduPilot SITL 5760), udpin:0.0.0.0:14540 (PX4 SITL), /dev/ttyUSB0:57600")
-    p.add_argument("--sysid", type=int, default=1, help="our MAVLink system id (default 1, like a companion)")
-    p.add_argument("--compid", type=int, default=191, help="our MAVLink component id (default 191, onboard computer)")
-    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the vehicle to be ready")
-    p.add_argument("--tolerance", type=float, default=1.0, help="arrival tolerance in metres")
-    sub = p.add_subparsers(dest="link_command", required=True, metavar="ACTION")
+    p = add_node_command(commands, "link", "MAVLink flight link (ArduPilot GUIDED, PX4 OFFBOARD): the link node, "
+                         "or an action (goto, takeoff, land, rtl)",
+                         "Without an action: the link node, flying the bus's waypoints and publishing the pose. "
+                         "With one: connect, do it, wait until done, print the telemetry.")
+    p.add_argument("--mavlink", metavar="URL",
+                   help="tcp:HOST:PORT (ArduPilot SITL 5760), udpin:0.0.0.0:14540 (PX4 SITL), /dev/ttyUSB0:57600 "
+                        "(default: the mission's for this vehicle)")
+    p.add_argument("--sysid", type=int, help="our MAVLink system id (default 1, like a companion)")
+    p.add_argument("--compid", type=int, help="our MAVLink component id (default 191, onboard computer)")
+    p.add_argument("--timeout", type=float, help="seconds to wait for the vehicle to be ready (default 60)")
+    p.add_argument("--tolerance", type=float, help="arrival tolerance in metres (default 1)")
+    sub = p.add_subparsers(dest="link_command", metavar="ACTION")
     goto = sub.add_parser("goto", help="fly to map-frame X Y Z (ENU metres from the autopilot's local origin)")
     for axis in ("x", "y", "z"):
         goto.add_argument(axis, type=float)
@@ -22,17 +30,37 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     takeoff.add_argument("alt", type=float)
     sub.add_parser("land", help="land where the vehicle is and wait until it disarms")
     sub.add_parser("rtl", help="return to launch and wait until it disarms")
-    p.set_defaults(func=_run)
+    for action in sub.choices.values():
+        action.set_defaults(func=_act)
 
 
-def _run(args: argparse.Namespace) -> int:
+def link_node_config(args: argparse.Namespace, mission, tables: dict[str, Any], vehicle: str):
+    """The mission's ``[link]`` table with the command line's overrides.
+
+    The autopilot's URL: --mavlink, else for a camera-only mission the real autopilot's
+    (``[link.link].url``), else this vehicle's simulator.
+    """
+    from layerpilot.config import from_dict
+    from layerpilot.nodes.link import LinkNodeConfig
+
+    data = dict(tables.get("link", {}))
+    link = dict(data.get("link", {}))
+    if args.mavlink or not mission.camera_only:
+        link["url"] = args.mavlink or mission.mavlink_url(vehicle)
+    given = {"source_system": args.sysid, "source_component": args.compid, "ready_timeout_s": args.timeout,
+             "arrival_tolerance_m": args.tolerance}
+    data["link"] = {**link, **{k: v for k, v in given.items() if v is not None}}
+    return from_dict(LinkNodeConfig, data, "link")
+
+
+def _act(args: argparse.Namespace) -> int:
     import math
 
-    from layerpilot.link.config import LinkConfig
     from layerpilot.link.link import FlightLink, LinkError
+    from layerpilot.nodes.mission import load_mission
 
-    config = LinkConfig(url=args.mavlink, source_system=args.sysid, source_component=args.compid,
-                        ready_timeout_s=args.timeout, arrival_tolerance_m=args.tolerance)
+    mission, tables = load_mission(args.config)
+    config = link_node_config(args, mission, tables, args.vehicle or mission.vehicles[0]).link
     with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True)) as link:
         try:
             link.connect()

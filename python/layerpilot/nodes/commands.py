@@ -1,12 +1,12 @@
-"""Node processes: `layerpilot node map-server|sim|link|depth|decide` (also `layerpilot map-server`
-and `layerpilot decide`), `layerpilot router`, `layerpilot up`; `layerpilot bench bus`.
+"""Node processes: `layerpilot map-server|sim|link|depth|decide`, `layerpilot router`,
+`layerpilot up`; `layerpilot bench bus`.
 
-`layerpilot sim|link|depth` are the simulator's, link's and depth's own commands (standalone
-tools), so their bus processes live under `layerpilot node`.
-
-Every node reads the mission file (``--config``: a path or a name in config/missions/),
-prints one JSON line when ready and a JSON status line every ``--status-every`` seconds,
-and on SIGTERM/SIGINT finishes its current message, prints a last status line and exits 0.
+`sim`, `link` and `depth` also have actions of their own (`layerpilot sim preview`,
+`layerpilot link takeoff 20`, `layerpilot depth preview`); without an action they run
+their bus node. Every node reads the mission file (``--config``: a path or a name in
+config/missions/), prints one JSON line when ready and a JSON status line every
+``--status-every`` seconds, and on SIGTERM/SIGINT finishes its current message, prints a
+last status line and exits 0.
 """
 
 from __future__ import annotations
@@ -14,25 +14,15 @@ from __future__ import annotations
 import argparse
 import json
 import threading
+from dataclasses import dataclass, field
 from typing import Any, Callable
-
-ROLES = ("map-server", "sim", "link", "depth", "decide")
 
 
 def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    helps = {
-        "map-server": "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)",
-        "sim": "simulated vehicle: renders camera frames onto the bus, serves MAVLink",
-        "link": "MAVLink flight link: waypoints from the bus to the autopilot, pose back",
-        "depth": "camera frames in, point clouds out",
-        "decide": "layer sets + pose in, decisions and waypoints out",
-    }
-    node = commands.add_parser("node", help="run one bus node of a mission (what `layerpilot up` starts)")
-    roles = node.add_subparsers(dest="role", required=True, metavar="ROLE")
-    for role in ROLES:
-        _node_parser(roles, role, helps[role])
-    for role in ("map-server", "decide"):  # the two roles without a standalone command of the same name
-        _node_parser(commands, role, helps[role])
+    p = add_node_command(commands, "map-server",
+                         "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)")
+    p.add_argument("--snapshot", help="snapshot .ot path (reloaded at start); '' for none")
+    add_node_command(commands, "decide", "layer sets + pose in, decisions and waypoints out")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
@@ -53,21 +43,26 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     b.set_defaults(func=_bench_bus)
 
 
-def _node_parser(parent: argparse._SubParsersAction, role: str, help: str) -> None:
-    p = parent.add_parser(role, help=help)
-    _node_args(p)
-    if role in ("sim", "link"):
-        p.add_argument("--mavlink", help="MAVLink URL (default: the mission's for this vehicle)")
-    if role == "map-server":
-        p.add_argument("--snapshot", help="snapshot .ot path (reloaded at start); '' for none")
-    p.set_defaults(func=_run_node, role=role)
-
-
-def _node_args(p: argparse.ArgumentParser) -> None:
+def add_node_command(commands: argparse._SubParsersAction, role: str, help: str,
+                     description: str | None = None) -> argparse.ArgumentParser:
+    """`layerpilot ROLE` running the role's bus node; the caller adds the role's own options."""
+    p = commands.add_parser(role, help=help, description=description or help)
     p.add_argument("--config", help="mission file or name in config/missions/ (default: default)")
     p.add_argument("--vehicle", default=None, help="vehicle name (default: the mission's first)")
     p.add_argument("--endpoint", help="Zenoh endpoint (default: the mission's, tcp/127.0.0.1:7447)")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between JSON status lines")
+    p.set_defaults(func=_run_node, role=role)
+    return p
+
+
+@dataclass
+class Running:
+    """A started node: its status counters, its blocking run(stop), its stop() and what it tells when ready."""
+
+    status: Callable[[], dict]
+    run: Callable[[threading.Event], None]
+    stop: Callable[[], None] = lambda: None
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 def _say(**fields: Any) -> None:
@@ -76,22 +71,23 @@ def _say(**fields: Any) -> None:
 
 def _run_node(args: argparse.Namespace) -> int:
     from layerpilot.bus.session import open_session
-    from layerpilot.config import from_dict
     from layerpilot.nodes.mission import load_mission
     from layerpilot.nodes.runner import bus_config, stop_event
 
     mission, tables = load_mission(args.config)
     vehicle = args.vehicle or mission.vehicles[0]
+    if vehicle not in mission.vehicles:
+        raise ValueError(f"--vehicle {vehicle!r}: the mission's vehicles are {mission.vehicles}")
     stop = stop_event()
     session = open_session(bus_config(tables, args.endpoint))
     try:
-        node, status, run = _build(args, mission, tables, vehicle, session, from_dict)
-        _say(node=args.role, vehicle=vehicle, status="ready")
-        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, status), daemon=True)
+        node = _BUILDERS[args.role](args, mission, tables, vehicle, session)
+        _say(node=args.role, vehicle=vehicle, status="ready", **node.info)
+        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, node.status), daemon=True)
         ticker.start()
-        run(stop)
-        node.stop() if hasattr(node, "stop") else None
-        _say(node=args.role, vehicle=vehicle, status="stopped", **status())
+        node.run(stop)
+        node.stop()
+        _say(node=args.role, vehicle=vehicle, status="stopped", **node.status())
     finally:
         session.close()
     return 0
@@ -102,57 +98,80 @@ def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, 
         _say(node=args.role, vehicle=vehicle, **status())
 
 
-def _build(args, mission, tables, vehicle, session, from_dict):
-    """(node, status() -> dict, run(stop)) for the role; run blocks until stop is set."""
-    wait = lambda stop: stop.wait()  # noqa: E731 - nodes that work on their own threads
-    if args.role == "map-server":
-        from layerpilot.nodes.map_server import MapServer, MapServerConfig
+def _wait(stop: threading.Event) -> None:
+    """run() of the nodes that work on their own threads."""
+    stop.wait()
 
-        data = dict(tables.get("map_server", {}))
-        if args.snapshot is not None:
-            data["snapshot"] = args.snapshot
-        node = MapServer(session, from_dict(MapServerConfig, data, "map_server"))
-        node.start()
-        c = node.counters
-        return node, lambda: {"received": c.clouds_received, "inserted": c.clouds_inserted,
-                              "dropped": c.clouds_dropped, "rejected": node.rejects.total,
-                              "layer_sets": c.layer_sets_published, "queries": c.queries_answered,
-                              "snapshots": c.snapshots_written, "leaves": node.map.stats()["leaves"]}, wait
-    if args.role == "depth":
-        from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
 
-        node = DepthNode(session, vehicle, from_dict(DepthNodeConfig, tables.get("depth", {}), "depth"))
-        node.start()
-        q = node.queue
-        return node, lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
-                              "rejected": node.rejects.total}, wait
-    if args.role == "decide":
-        from layerpilot.nodes.decide import DecideConfig, DecideNode
+def _map_server(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.config import from_dict
+    from layerpilot.nodes.map_server import MapServer, MapServerConfig
 
-        node = DecideNode(session, vehicle, from_dict(DecideConfig, tables.get("decide", {}), "decide"))
-        node.start()
-        return node, lambda: {"decisions": node.seq, "reached": node.reached,
-                              "distance": round(node.distance_flown, 1), "rejected": node.rejects.total}, wait
-    if args.role == "link":
-        from layerpilot.nodes.link import LinkNodeConfig, LinkNode
+    data = dict(tables.get("map_server", {}))
+    if args.snapshot is not None:
+        data["snapshot"] = args.snapshot
+    node = MapServer(session, from_dict(MapServerConfig, data, "map_server"))
+    node.start()
+    c = node.counters
+    return Running(lambda: {"received": c.clouds_received, "inserted": c.clouds_inserted,
+                            "dropped": c.clouds_dropped, "rejected": node.rejects.total,
+                            "layer_sets": c.layer_sets_published, "queries": c.queries_answered,
+                            "snapshots": c.snapshots_written, "leaves": node.map.stats()["leaves"]},
+                   _wait, node.stop, {"snapshot": node.cfg.snapshot})
 
-        data = dict(tables.get("link", {}))
-        if args.mavlink or not mission.camera_only:  # camera-only: the real autopilot's URL from [link.link]
-            data["link"] = {**data.get("link", {}), "url": args.mavlink or mission.mavlink_url(vehicle)}
-        node = LinkNode(session, vehicle, from_dict(LinkNodeConfig, data, "link"))
-        node.start()
-        return node, lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
-                              "telemetry": node.link.telemetry().line()}, wait
+
+def _depth(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.config import from_dict
+    from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
+
+    node = DepthNode(session, vehicle, from_dict(DepthNodeConfig, tables.get("depth", {}), "depth"))
+    node.start()
+    q = node.queue
+    return Running(lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
+                            "rejected": node.rejects.total}, _wait, node.stop, {"source": node.cfg.source})
+
+
+def _decide(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.config import from_dict
+    from layerpilot.nodes.decide import DecideConfig, DecideNode
+
+    node = DecideNode(session, vehicle, from_dict(DecideConfig, tables.get("decide", {}), "decide"))
+    node.start()
+    return Running(lambda: {"decisions": node.seq, "reached": node.reached,
+                            "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
+                   _wait, node.stop, {"behavior": node.cfg.behavior})
+
+
+def _link(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.link.commands import link_node_config
+    from layerpilot.nodes.link import LinkNode
+
+    node = LinkNode(session, vehicle, link_node_config(args, mission, tables, vehicle))
+    return Running(lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
+                            "telemetry": node.link.telemetry().line()}, node.run, node.stop,
+                   {"mavlink": node.cfg.link.url})
+
+
+def _sim(args, mission, tables, vehicle, session) -> Running:
     from layerpilot.nodes.sim import CameraOnlyNode, SimNode
-    from layerpilot.sim.simulator import SimConfig
+    from layerpilot.sim.commands import sim_config
 
-    data = dict(tables.get("sim", {}))
     if mission.camera_only:
-        node = CameraOnlyNode(session, vehicle, from_dict(SimConfig, data, "sim"))
-        return node, lambda: {"frames": node.frames, "rejected": node.rejects.total}, node.run
-    data["urls"] = [args.mavlink or mission.mavlink_url(vehicle)]
-    node = SimNode(session, vehicle, from_dict(SimConfig, data, "sim"), speed=mission.speed)
-    return node, lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, node.run
+        node = CameraOnlyNode(session, vehicle, sim_config(args, tables))
+        return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total}, node.run,
+                       info={"camera_only": True})
+    config = sim_config(args, tables, urls=(args.mavlink or mission.mavlink_url(vehicle),))
+    speed = mission.speed if args.speed is None else args.speed
+    try:
+        node = SimNode(session, vehicle, config, speed=speed, duration=args.duration)
+    except OSError as exc:  # the MAVLink port is taken or the address is wrong
+        raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
+    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, node.run,
+                   info=node.describe())
+
+
+_BUILDERS: dict[str, Callable[..., Running]] = {"map-server": _map_server, "depth": _depth, "decide": _decide,
+                                                "link": _link, "sim": _sim}
 
 
 def _router(args: argparse.Namespace) -> int:

@@ -65,17 +65,24 @@ class LinkNode:
     def clock(self) -> float:
         return time.monotonic() - self._t0
 
-    def start(self) -> None:
-        """Connect, take off, then follow waypoints (blocks until airborne)."""
+    def run(self, stop: threading.Event) -> None:
+        """Connect, take off, then follow waypoints until ``stop``; a stop during the takeoff aborts it."""
+        threading.Thread(target=lambda: (stop.wait(), self.link.close()), daemon=True).start()
         link = self.link
-        link.connect()
-        self._thread.start()  # pose from now on, so the ground sees the takeoff
-        link.wait_ready()
-        link.start_guided()
-        link.arm()
-        link.takeoff(self.cfg.takeoff_altitude)
+        try:
+            link.connect()
+            self._thread.start()  # pose from now on, so the ground sees the takeoff
+            link.wait_ready()
+            link.start_guided()
+            link.arm()
+            link.takeoff(self.cfg.takeoff_altitude)
+        except LinkError:
+            if stop.is_set():  # the waits end with an error when the link is closed
+                return
+            raise
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
                                                     guarded(decode_waypoint, self._on_waypoint, self.rejects))
+        stop.wait()
 
     def _on_waypoint(self, w: Waypoint, key: str) -> None:
         if w.seq == self._last_seq:  # decide repeats its current waypoint until reached

@@ -35,12 +35,12 @@ def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, 
 
 class SimNode:
     def __init__(self, session: zenoh.Session, vehicle: str, sim_config, *, speed: float = 1.0,
-                 publish_depth: bool = True) -> None:
+                 duration: float | None = None, publish_depth: bool = True) -> None:
         from layerpilot.sim.simulator import Simulator
 
         self.session, self.keys = session, keys.Keys(vehicle)
         self.sim = Simulator(sim_config)
-        self.speed = speed
+        self.speed, self.duration = speed, duration
         self.publish_depth = publish_depth
         self.frames = 0
 
@@ -48,10 +48,18 @@ class SimNode:
         self.frames += 1
         publish_frame(self.session, self.keys, self.frames, stamp, rendered, self.publish_depth)
 
+    def describe(self) -> dict:
+        """What a user needs to connect: the MAVLink addresses actually served (port 0 = a free one), the world."""
+        c = self.sim.config
+        return {"mavlink": [f"{u} -> {h}:{p}" for u, (h, p) in zip(c.urls, self.sim.endpoint.addresses)],
+                "flavour": c.flavour, "seed": c.world.seed, "trees": self.sim.world.stats()["trees"],
+                "camera": f"{c.camera.width}x{c.camera.height} at {c.frame_rate_hz:g} Hz",
+                "renderer": self.sim.renderer.renderer_name, "speed": self.speed}
+
     def run(self, stop: threading.Event) -> None:
-        """Step the simulator paced to the wall clock until ``stop`` (SIGTERM) is set."""
+        """Step the simulator paced to the wall clock until ``stop`` (SIGTERM) is set or ``duration`` has passed."""
         try:
-            self.sim.run(self._on_frame, speed=self.speed, stop=stop)
+            self.sim.run(self._on_frame, speed=self.speed, duration=self.duration, stop=stop)
         finally:
             self.sim.close()
 

@@ -62,10 +62,10 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None)
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide."""
     base = [sys.executable, "-m", "layerpilot.cli"]
     common = ["--config", str(mission_path)] + (["--endpoint", endpoint] if endpoint else [])
-    nodes = [NodeProcess("map-server", base + ["node", "map-server"] + common)]
+    nodes = [NodeProcess("map-server", base + ["map-server"] + common)]
     for v in vehicles:
         for role in ("sim", "link", "depth", "decide"):
-            nodes.append(NodeProcess(f"{role}/{v}", base + ["node", role, "--vehicle", v] + common))
+            nodes.append(NodeProcess(f"{role}/{v}", base + [role, "--vehicle", v] + common))
     return nodes
 
 

@@ -1,27 +1,30 @@
-"""Simulator commands: `layerpilot sim` (run), `layerpilot sim preview`, `layerpilot bench sim`."""
+"""Simulator commands: `layerpilot sim` (the simulator node), `layerpilot sim preview`, `layerpilot bench sim`."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
+
+from layerpilot.nodes.commands import add_node_command
 
 
 def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = commands.add_parser("sim", help="run the simulator (MAVLink vehicle + camera), or draw a preview",
-                            description="Without an action: serve the simulated vehicle on MAVLink and "
-                                        "render its camera at --rate frames per mission second.")
-    p.add_argument("--config", type=Path, help="TOML file with [world] and [camera] tables (and sim keys)")
-    p.add_argument("--seed", type=int, help="world seed (overrides the config)")
-    p.add_argument("--url", action="append", help="MAVLink URL to serve (repeatable), default tcp:127.0.0.1:5760")
-    p.add_argument("--rate", type=float, help="camera frames per mission second (default 5)")
-    p.add_argument("--speed", type=float, default=1.0, help="mission clock speed vs real time")
-    p.add_argument("--duration", type=float, help="stop after this many mission seconds (default: run until ^C)")
-    p.add_argument("--flavour", choices=("ardupilot", "px4"), help="autopilot conventions (default ardupilot)")
-    p.set_defaults(func=_run)
+    p = add_node_command(commands, "sim", "the simulator node: MAVLink vehicle + camera frames on the bus; "
+                         "or an action (preview)",
+                         "Without an action: serve the mission's simulated vehicle on MAVLink and publish "
+                         "its camera frames on the bus (with camera_only = true: render the pose a real "
+                         "autopilot reports).")
+    _world_args(p)
+    p.add_argument("--mavlink", metavar="URL", help="MAVLink URL to serve (default: the mission's for this vehicle)")
+    p.add_argument("--flavour", choices=("ardupilot", "px4"), help="autopilot conventions (default: the mission's)")
+    p.add_argument("--speed", type=float, help="mission clock speed vs real time (default: the mission's)")
+    p.add_argument("--duration", type=float, help="stop after this many mission seconds (default: until SIGTERM)")
     sub = p.add_subparsers(dest="sim_command", metavar="ACTION")
     pv = sub.add_parser("preview", help="write a PNG: camera view, its depth, top-down map of the world")
-    pv.add_argument("--config", type=Path, help="TOML file with [world] and [camera] tables")
-    pv.add_argument("--seed", type=int)
+    # SUPPRESS: given before or after `preview`, these keep their value
+    pv.add_argument("--config", default=argparse.SUPPRESS, help="mission file or name (its [sim] table)")
+    _world_args(pv, default=argparse.SUPPRESS)
     pv.add_argument("--x", type=float, default=0.0, help="vehicle east (m)")
     pv.add_argument("--y", type=float, default=0.0, help="vehicle north (m)")
     pv.add_argument("--agl", type=float, default=30.0, help="height above the terrain (m)")
@@ -35,58 +38,31 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     b.set_defaults(func=lambda a: __import__("layerpilot.sim.bench", fromlist=["main"]).main(a.frames, a.seed))
 
 
-def _load(args: argparse.Namespace):
-    """SimConfig from --config with command-line overrides."""
+def _world_args(p: argparse.ArgumentParser, default: Any = None) -> None:
+    p.add_argument("--seed", type=int, default=default, help="world seed (default: the mission's)")
+    p.add_argument("--rate", type=float, default=default, help="camera frames per mission second (default: the mission's)")
+
+
+def sim_config(args: argparse.Namespace, tables: dict[str, Any], **overrides: Any):
+    """The mission's ``[sim]`` table as a SimConfig, with the command line's overrides."""
     import dataclasses
 
-    from layerpilot.config import from_dict, load_toml
+    from layerpilot.config import from_dict
     from layerpilot.sim.simulator import SimConfig
 
-    data = load_toml(args.config) if args.config else {}
-    config = from_dict(SimConfig, data, "sim")
+    config = from_dict(SimConfig, tables.get("sim", {}), "sim")
     if args.seed is not None:
         config = dataclasses.replace(config, world=dataclasses.replace(config.world, seed=args.seed))
-    overrides = {k: getattr(args, a, None) for k, a in (("frame_rate_hz", "rate"), ("flavour", "flavour"))}
-    if getattr(args, "url", None):
-        overrides["urls"] = tuple(args.url)
-    return dataclasses.replace(config, **{k: v for k, v in overrides.items() if v is not None})
+    given = {"frame_rate_hz": args.rate, "flavour": getattr(args, "flavour", None), **overrides}
+    return dataclasses.replace(config, **{k: v for k, v in given.items() if v is not None})
 
 
 def _preview(args: argparse.Namespace) -> None:
+    from layerpilot.nodes.mission import load_mission
     from layerpilot.sim.preview import write_preview
     from layerpilot.sim.world import World
 
-    config = _load(args)
+    config = sim_config(args, load_mission(args.config)[1])
     info = write_preview(World(config.world), config.camera, args.x, args.y, args.agl, args.yaw, args.out)
     print(f"wrote {info['path']} (depth {info['depth_min_m']:.1f}-{info['depth_max_m']:.1f} m, "
           f"sky {100 * info['sky_fraction']:.0f}%, {info['renderer']})")
-
-
-def _run(args: argparse.Namespace) -> None:
-    import time
-
-    from layerpilot.sim.simulator import Simulator
-
-    config = _load(args)
-    try:
-        sim = Simulator(config)
-    except OSError as exc:  # the MAVLink port is taken or the address is wrong
-        raise ValueError(str(exc)) from None
-    with sim:
-        hosts = ", ".join(f"{u} -> {h}:{p}" for u, (h, p) in zip(config.urls, sim.endpoint.addresses))
-        s = sim.world.stats()
-        print(f"layerpilot sim: world seed {config.world.seed} ({s['trees']} trees), MAVLink on {hosts}, "
-              f"camera {config.camera.width}x{config.camera.height} at {config.frame_rate_hz:g} Hz, "
-              f"{sim.renderer.renderer_name}", flush=True)
-        last = [time.monotonic(), 0]
-
-        def on_frame(stamp: float, frame) -> None:
-            now = time.monotonic()
-            if now - last[0] >= 5.0:
-                x, y, z = frame.pose.centre
-                print(f"t={stamp:8.2f} s  frames={sim.frames}  {(sim.frames - last[1]) / (now - last[0]):.1f} fps  "
-                      f"vehicle ({x:.1f}, {y:.1f}, {z:.1f}) clients={sim.endpoint.clients}", flush=True)
-                last[:] = [now, sim.frames]
-
-        sim.run(on_frame, speed=args.speed, duration=args.duration)
-        print(f"layerpilot sim: stopped at t={sim.time:.2f} s after {sim.frames} frames", flush=True)
