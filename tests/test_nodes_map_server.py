@@ -110,10 +110,12 @@ def test_full_queue_drops_oldest_and_stays_bounded(bus):
     # no worker yet: every cloud waits in the queue, so the drops are deterministic
     for i in range(10):
         server._enqueue(ground_cloud(float(i)), K.cloud)
-    assert server.pending() == 3 and server.counters.clouds_dropped == 7
-    assert [c.stamp for c in server._queue] == [7.0, 8.0, 9.0]  # the newest survive
+    assert len(server.queue) == 3 and server.counters.clouds_dropped == 7 and server.counters.clouds_received == 10
+    assert [server.queue.get().stamp for _ in range(3)] == [7.0, 8.0, 9.0]  # the newest survive, oldest first
+    server._enqueue(ground_cloud(10.0), K.cloud)
     server.start()
-    wait_for(lambda: server.counters.clouds_inserted == 3, "3 inserts")
+    wait_for(lambda: server.counters.clouds_inserted == 1, "the insert")
+    assert server.counters.last_stamp == 10.0 and len(server.queue) == 0
     server.stop()
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,7 @@ from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.map import VoxelMap
+from layerpilot.nodes.queue import DropOldest
 
 _log = logging.getLogger("layerpilot.map_server")
 MAX_WINDOW = 2048  # cells per side a query may ask for
@@ -63,9 +63,8 @@ class MapServerConfig:
 
 @dataclass
 class Counters:
-    clouds_received: int = 0
+    queue: DropOldest[Cloud]  # counts the clouds received and dropped where they are handed over
     clouds_inserted: int = 0
-    clouds_dropped: int = 0
     points_inserted: int = 0
     snapshots_written: int = 0
     layer_sets_published: int = 0
@@ -73,16 +72,24 @@ class Counters:
     last_stamp: float = 0.0  # newest mission-clock stamp seen (stamps the layer sets)
     vehicles: set[str] = field(default_factory=set)
 
+    @property
+    def clouds_received(self) -> int:
+        return self.queue.received
+
+    @property
+    def clouds_dropped(self) -> int:
+        return self.queue.dropped
+
 
 class MapServer:
     def __init__(self, session: zenoh.Session, cfg: MapServerConfig) -> None:
         self.session = session
         self.cfg = cfg
         self.rejects = Rejects(_log)
-        self.counters = Counters()
+        self.queue: DropOldest[Cloud] = DropOldest(cfg.queue_size)
+        self.counters = Counters(self.queue)
         self.map = self._load_or_new()
-        self._queue: deque[Cloud] = deque()
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()  # counters shared by the Zenoh callback and the workers
         self._stop = threading.Event()
         self._pool = ThreadPoolExecutor(cfg.query_threads, thread_name_prefix="map-query")
         self._dirty = False
@@ -116,8 +123,7 @@ class MapServer:
     def stop(self) -> None:
         """Finish the cloud being inserted, stop serving, write a last snapshot."""
         self._stop.set()
-        with self._cond:
-            self._cond.notify_all()
+        self.queue.close()
         for d in self._decls:
             d.undeclare()
         for t in self._threads:
@@ -129,39 +135,24 @@ class MapServer:
     # --- clouds ---------------------------------------------------------------------------
 
     def _enqueue(self, cloud: Cloud, key: str) -> None:
-        with self._cond:
-            self.counters.clouds_received += 1
+        with self._lock:
             self.counters.vehicles.add(keys.vehicle_of(key))
-            if len(self._queue) >= self.cfg.queue_size:
-                self._queue.popleft()
-                self.counters.clouds_dropped += 1
-            self._queue.append(cloud)
-            self._cond.notify()
+        self.queue.put(cloud)
 
     def _insert_loop(self) -> None:
-        while True:
-            with self._cond:
-                while not self._queue and not self._stop.is_set():
-                    self._cond.wait()
-                if self._stop.is_set():
-                    return
-                cloud = self._queue.popleft()
+        while (cloud := self.queue.get()) is not None:
             try:
                 result = self.map.insert(cloud.points, cloud.origin, cloud.colors, stamp=cloud.stamp,
                                          max_range=cloud.max_range or self.cfg.max_range)
             except ValueError as exc:
                 self.rejects.reject(keys.PREFIX + f"/{cloud.vehicle}/cloud", BadMessage("insert failed", str(exc)))
                 continue
-            with self._cond:
+            with self._lock:
                 c = self.counters
                 c.clouds_inserted += 1
                 c.points_inserted += result.points_used
                 c.last_stamp = max(c.last_stamp, cloud.stamp)
                 self._dirty = True
-
-    def pending(self) -> int:
-        with self._cond:
-            return len(self._queue)
 
     # --- layer sets -----------------------------------------------------------------------
 
@@ -175,7 +166,7 @@ class MapServer:
         x, y, w, h = self.cfg.window
         while not self._stop.wait(max(0.0, next_t - time.monotonic())):
             next_t += period
-            with self._cond:
+            with self._lock:
                 vehicles = sorted(self.counters.vehicles)
             for v in vehicles:
                 try:
