@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -9,6 +10,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
@@ -50,3 +52,33 @@ def stop_up(up: subprocess.Popen) -> None:
         except subprocess.TimeoutExpired:
             os.killpg(up.pid, signal.SIGKILL)
             up.wait()
+
+
+@contextlib.contextmanager
+def cli_process(*args: str) -> Iterator[subprocess.Popen]:
+    """`layerpilot ARGS` as a child process with text pipes; killed on the way out if still running."""
+    proc = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+# The node tables of the small missions the `layerpilot up` tests fly (ground-truth depth, 160x120 camera)
+SMALL_MISSION_NODES = """
+[depth]
+source = "ground_truth"
+stride = 4
+[decide]
+behavior = "balanced"
+[link]
+takeoff_altitude = 30.0
+[sim]
+frame_rate_hz = 2.0
+[sim.camera]
+width = 160
+height = 120
+"""

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -11,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import wait_for
+from conftest import cli_process
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
@@ -19,9 +21,8 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 SMALL_SIM = "[sim]\nframe_rate_hz = 4.0\n[sim.world]\nsize = 100.0\n[sim.camera]\nwidth = 160\nheight = 120\n"
 
 
-def spawn(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "layerpilot.cli", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "layerpilot.cli", *args], capture_output=True, text=True, timeout=60)
 
 
 def mission(tmp_path: Path, text: str = SMALL_SIM) -> str:
@@ -32,35 +33,27 @@ def mission(tmp_path: Path, text: str = SMALL_SIM) -> str:
 
 def test_sim_node_serves_mavlink_and_publishes_frames_for_the_given_mission_time(tmp_path):
     ep = free_endpoint()
-    proc = spawn("sim", "--config", mission(tmp_path), "--endpoint", ep, "--mavlink", "tcp:127.0.0.1:0",
-                 "--duration", "3", "--speed", "1")
-    client = None
-    try:
+    with cli_process("sim", "--config", mission(tmp_path), "--endpoint", ep, "--mavlink", "tcp:127.0.0.1:0",
+                     "--duration", "3", "--speed", "1") as proc:
         ready = json.loads(proc.stdout.readline())
         assert ready["status"] == "ready" and ready["node"] == "sim" and ready["vehicle"] == "uav1"
         assert ready["mavlink"][0].startswith("tcp:127.0.0.1:0 -> 127.0.0.1:")
         assert ready["camera"] == "160x120 at 4 Hz" and ready["seed"] == 0 and ready["trees"] > 0
         frames: list[msg.Frame] = []
-        client = open_session(BusConfig(endpoint=ep))
-        client.declare_subscriber(Keys("uav1").camera, lambda s: frames.append(msg.decode_frame(s.payload.to_bytes())))
-        out, err = proc.communicate(timeout=60)
-        assert proc.returncode == 0, err
-        last = json.loads(out.strip().splitlines()[-1])
-        assert last["status"] == "stopped" and last["time"] == 3.0 and last["frames"] == 13  # t = 0, 0.25, ..., 3
-        assert frames, "no camera frame reached a peer on the bus"
-        assert frames[-1].image.shape == (120, 160, 3) and frames[-1].depth.shape == (120, 160)
-    finally:
-        if client is not None:
-            client.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        with open_session(BusConfig(endpoint=ep)) as client:
+            client.declare_subscriber(Keys("uav1").camera,
+                                      lambda s: frames.append(msg.decode_frame(s.payload.to_bytes())))
+            out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    last = json.loads(out.strip().splitlines()[-1])
+    assert last["status"] == "stopped" and last["time"] == 3.0 and last["frames"] == 13  # t = 0, 0.25, ..., 3
+    assert frames, "no camera frame reached a peer on the bus"
+    assert frames[-1].image.shape == (120, 160, 3) and frames[-1].depth.shape == (120, 160)
 
 
 def test_sim_node_rejects_a_bad_rate_naming_the_key(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "sim", "--config", mission(tmp_path),
-                           "--endpoint", free_endpoint(), "--mavlink", "tcp:127.0.0.1:0", "--rate", "0"],
-                          capture_output=True, text=True, timeout=60)
+    done = run("sim", "--config", mission(tmp_path), "--endpoint", free_endpoint(), "--mavlink", "tcp:127.0.0.1:0",
+               "--rate", "0")
     assert done.returncode == 2 and "frame_rate_hz" in done.stderr
 
 
@@ -69,41 +62,45 @@ def test_sim_node_reports_a_busy_mavlink_port(tmp_path):
         s.bind(("127.0.0.1", 0))
         s.listen()
         url = f"tcp:127.0.0.1:{s.getsockname()[1]}"
-        done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "sim", "--config", mission(tmp_path),
-                               "--endpoint", free_endpoint(), "--mavlink", url],
-                              capture_output=True, text=True, timeout=60)
+        done = run("sim", "--config", mission(tmp_path), "--endpoint", free_endpoint(), "--mavlink", url)
     assert done.returncode == 2 and f"MAVLink {url}" in done.stderr
 
 
+TGKILL = {"x86_64": 234, "aarch64": 131}  # syscall numbers
+
+
+def sigterm_a_worker_thread(pid: int) -> None:
+    """SIGTERM one of the process's other threads (Zenoh's, ours), as kill(2) may hand it to any thread."""
+    tids = [int(t) for t in os.listdir(f"/proc/{pid}/task") if int(t) != pid]
+    libc = ctypes.CDLL(None, use_errno=True)
+    assert libc.syscall(TGKILL[os.uname().machine], pid, max(tids), signal.SIGTERM) == 0, ctypes.get_errno()
+
+
+@pytest.mark.parametrize("to_thread", [False, True], ids=["to-process", "to-a-worker-thread"])
 @pytest.mark.parametrize("role", ["sim", "depth", "decide", "link"])
-def test_node_exits_cleanly_on_sigterm(role, tmp_path):
+def test_node_exits_cleanly_on_sigterm(role, to_thread, tmp_path):
     """Every node: ready, status lines, then SIGTERM -> a last 'stopped' line and exit 0.
 
-    The link node is stopped while it is still waiting for an autopilot (nothing serves its URL):
-    SIGTERM must end that wait too.
+    The signal may land on any thread; Python handles it on the main thread, so a main
+    thread blocked without a timeout would never exit (it did, ~1 in 10 missions). The link
+    node is stopped while it still waits for an autopilot (nothing serves its URL).
     """
     with socket.socket() as s:  # a port nobody serves
         s.bind(("127.0.0.1", 0))
         nobody = f"tcp:127.0.0.1:{s.getsockname()[1]}"
     extra = {"sim": ["--mavlink", "tcp:127.0.0.1:0"], "link": ["--mavlink", nobody]}.get(role, [])
-    proc = spawn(role, "--config", mission(tmp_path), "--endpoint", free_endpoint(), "--status-every", "0.2", *extra)
-    try:
+    with cli_process(role, "--config", mission(tmp_path), "--endpoint", free_endpoint(), "--status-every", "0.2",
+                     *extra) as proc:
         lines = [json.loads(proc.stdout.readline())]
         assert lines[0]["status"] == "ready" and lines[0]["node"] == role
         lines.append(json.loads(proc.stdout.readline()))  # a status line: the node is running
         assert "status" not in lines[1] and lines[1]["node"] == role
-        proc.send_signal(signal.SIGTERM)
+        sigterm_a_worker_thread(proc.pid) if to_thread else proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
         assert json.loads(out.strip().splitlines()[-1])["status"] == "stopped"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_unknown_vehicle_is_refused(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "depth", "--config", mission(tmp_path),
-                           "--vehicle", "uav9", "--endpoint", free_endpoint()], capture_output=True, text=True,
-                          timeout=60)
+    done = run("depth", "--config", mission(tmp_path), "--vehicle", "uav9", "--endpoint", free_endpoint())
     assert done.returncode == 2 and "uav9" in done.stderr and "uav1" in done.stderr

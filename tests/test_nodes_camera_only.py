@@ -15,7 +15,7 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.world import World, WorldConfig
-from conftest import start_up, stop_up
+from conftest import SMALL_MISSION_NODES, start_up, stop_up
 
 K = Keys("uav1")
 
@@ -33,20 +33,9 @@ resolution = 1.0
 layers_rate = 2.0
 window = [-128.0, -128.0, 256, 256]
 snapshot = ""
-[depth]
-source = "ground_truth"
-stride = 4
-[decide]
-behavior = "balanced"
-[link]
-takeoff_altitude = 30.0
+""" + SMALL_MISSION_NODES + f"""
 [link.link]
 url = "tcp:127.0.0.1:{sitl.addresses[0][1]}"
-[sim]
-frame_rate_hz = 2.0
-[sim.camera]
-width = 160
-height = 120
 """)
     up, lines = start_up(mission, ep, tmp_path / "logs")
     client = open_session(BusConfig(endpoint=ep))

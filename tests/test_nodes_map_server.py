@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -21,7 +18,7 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
 from layerpilot.nodes.map_server import MapServer, MapServerConfig
-from conftest import wait_for
+from conftest import cli_process, wait_for
 
 K = Keys("uav1")
 
@@ -124,34 +121,25 @@ def test_daemon_process_serves_and_exits_on_sigterm(tmp_path):
     snap = tmp_path / "map.ot"
     mission = tmp_path / "mission.toml"
     mission.write_text("[map_server]\nresolution = 0.5\nwindow = [-10.0, -10.0, 40, 40]\n")
-    proc = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "map-server", "--config", str(mission),
-                             "--endpoint", ep, "--snapshot", str(snap), "--status-every", "0.2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    client = None
-    try:
+    with cli_process("map-server", "--config", str(mission), "--endpoint", ep, "--snapshot", str(snap),
+                     "--status-every", "0.2") as proc:
         assert json.loads(proc.stdout.readline())["status"] == "ready"
-        client = open_session(BusConfig(endpoint=ep))
-        time.sleep(0.5)
-        client.put(K.cloud, msg.encode_cloud(ground_cloud(1.0)))
-        client.put(K.cloud, b"\x00garbage")
+        with open_session(BusConfig(endpoint=ep)) as client:
+            time.sleep(0.5)
+            client.put(K.cloud, msg.encode_cloud(ground_cloud(1.0)))
+            client.put(K.cloud, b"\x00garbage")
 
-        def inserted() -> bool:
-            return pb.MapStats.FromString(get_one(client, K.service("stats"))).clouds_inserted == 1
+            def inserted() -> bool:
+                return pb.MapStats.FromString(get_one(client, K.service("stats"))).clouds_inserted == 1
 
-        wait_for(inserted, "the daemon's insert")
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=20)
-        assert proc.returncode == 0, err
-        last = json.loads(out.strip().splitlines()[-1])
-        assert last["inserted"] == 1 and last["rejected"] == 1
-        assert "not protobuf" in err  # logged once with the reason
-        assert VoxelMap.load(snap).column_layers(-10, -10, 40, 40).observed.all()  # final snapshot on exit
-    finally:
-        if client is not None:
-            client.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+            wait_for(inserted, "the daemon's insert")
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    last = json.loads(out.strip().splitlines()[-1])
+    assert last["inserted"] == 1 and last["rejected"] == 1
+    assert "not protobuf" in err  # logged once with the reason
+    assert VoxelMap.load(snap).column_layers(-10, -10, 40, 40).observed.all()  # final snapshot on exit
 
 
 def test_bench_bus_runs_small():

@@ -18,7 +18,7 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
-from conftest import start_up, stop_up
+from conftest import SMALL_MISSION_NODES, start_up, stop_up
 
 K = Keys("uav1")
 K2 = Keys("uav2")
@@ -48,19 +48,7 @@ layers_rate = 2.0
 window = [-128.0, -128.0, 256, 256]
 snapshot = "{tmp_path / 'map.ot'}"
 snapshot_period = 2.0
-[depth]
-source = "ground_truth"
-stride = 4
-[decide]
-behavior = "balanced"
-[link]
-takeoff_altitude = 30.0
-[sim]
-frame_rate_hz = 2.0
-[sim.camera]
-width = 160
-height = 120
-""")
+""" + SMALL_MISSION_NODES)
     up, lines = start_up(mission, ep, tmp_path / "logs")
     client = None
     try:

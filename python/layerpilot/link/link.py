@@ -42,6 +42,7 @@ log = logging.getLogger("layerpilot.link")
 POSITION_ONLY = 0b110111111000      # x, y, z used; velocity, acceleration, yaw, yaw rate ignored
 POSITION_AND_YAW = 0b100111111000   # as above plus yaw
 POSITION_FRESH_S = 2.0              # a position estimate older than this does not count
+WAKE_S = 0.2                        # longest single sleep of a wait (see _wait)
 RECONNECT_PERIOD_S = 1.0            # while lost, a stream connection (TCP, serial) is reopened this often
 
 
@@ -620,8 +621,16 @@ class FlightLink:
             raise LinkLost(f"no link to the autopilot on {self.config.url}")
 
     def _wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """Wait for ``predicate`` (False on timeout or close) in slices of WAKE_S: the caller may be a
+        process's main thread, which must get back to the interpreter for a signal to be handled."""
+        deadline = time.monotonic() + timeout
         with self._cond:
-            return self._cond.wait_for(lambda: predicate() or self._stop.is_set(), timeout) and predicate()
+            while not (predicate() or self._stop.is_set()):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(min(left, WAKE_S))
+            return predicate()
 
     def _report(self, text: str, level: int = logging.WARNING) -> None:
         self.events.append(text)

@@ -57,12 +57,13 @@ def add_node_command(commands: argparse._SubParsersAction, role: str, help: str,
 
 @dataclass
 class Running:
-    """A started node: its status counters, its blocking run(stop), its stop() and what it tells when ready."""
+    """A started node: its status counters, its stop(), what it tells when ready, and its blocking
+    run(stop) (by default: wait for the stop, for nodes that work on their own threads)."""
 
     status: Callable[[], dict]
-    run: Callable[[threading.Event], None]
     stop: Callable[[], None] = lambda: None
     info: dict[str, Any] = field(default_factory=dict)
+    run: Callable[[threading.Event], None] | None = None
 
 
 def _say(**fields: Any) -> None:
@@ -72,7 +73,7 @@ def _say(**fields: Any) -> None:
 def _run_node(args: argparse.Namespace) -> int:
     from layerpilot.bus.session import open_session
     from layerpilot.nodes.mission import load_mission
-    from layerpilot.nodes.runner import bus_config, stop_event
+    from layerpilot.nodes.runner import bus_config, stop_event, wait_for_stop
 
     mission, tables = load_mission(args.config)
     vehicle = args.vehicle or mission.vehicles[0]
@@ -85,7 +86,7 @@ def _run_node(args: argparse.Namespace) -> int:
         _say(node=args.role, vehicle=vehicle, status="ready", **node.info)
         ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, node.status), daemon=True)
         ticker.start()
-        node.run(stop)
+        (node.run or wait_for_stop)(stop)
         node.stop()
         _say(node=args.role, vehicle=vehicle, status="stopped", **node.status())
     finally:
@@ -96,11 +97,6 @@ def _run_node(args: argparse.Namespace) -> int:
 def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, status: Callable[[], dict]) -> None:
     while not stop.wait(args.status_every):
         _say(node=args.role, vehicle=vehicle, **status())
-
-
-def _wait(stop: threading.Event) -> None:
-    """run() of the nodes that work on their own threads."""
-    stop.wait()
 
 
 def _map_server(args, mission, tables, vehicle, session) -> Running:
@@ -117,7 +113,7 @@ def _map_server(args, mission, tables, vehicle, session) -> Running:
                             "dropped": c.clouds_dropped, "rejected": node.rejects.total,
                             "layer_sets": c.layer_sets_published, "queries": c.queries_answered,
                             "snapshots": c.snapshots_written, "leaves": node.map.stats()["leaves"]},
-                   _wait, node.stop, {"snapshot": node.cfg.snapshot})
+                   node.stop, {"snapshot": node.cfg.snapshot})
 
 
 def _depth(args, mission, tables, vehicle, session) -> Running:
@@ -128,7 +124,7 @@ def _depth(args, mission, tables, vehicle, session) -> Running:
     node.start()
     q = node.queue
     return Running(lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
-                            "rejected": node.rejects.total}, _wait, node.stop, {"source": node.cfg.source})
+                            "rejected": node.rejects.total}, node.stop, {"source": node.cfg.source})
 
 
 def _decide(args, mission, tables, vehicle, session) -> Running:
@@ -139,7 +135,7 @@ def _decide(args, mission, tables, vehicle, session) -> Running:
     node.start()
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
-                   _wait, node.stop, {"behavior": node.cfg.behavior})
+                   node.stop, {"behavior": node.cfg.behavior})
 
 
 def _link(args, mission, tables, vehicle, session) -> Running:
@@ -148,8 +144,8 @@ def _link(args, mission, tables, vehicle, session) -> Running:
 
     node = LinkNode(session, vehicle, link_node_config(args, mission, tables, vehicle))
     return Running(lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
-                            "telemetry": node.link.telemetry().line()}, node.run, node.stop,
-                   {"mavlink": node.cfg.link.url})
+                            "telemetry": node.link.telemetry().line()}, node.stop,
+                   {"mavlink": node.cfg.link.url}, node.run)
 
 
 def _sim(args, mission, tables, vehicle, session) -> Running:
@@ -158,16 +154,16 @@ def _sim(args, mission, tables, vehicle, session) -> Running:
 
     if mission.camera_only:
         node = CameraOnlyNode(session, vehicle, sim_config(args, tables))
-        return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total}, node.run,
-                       info={"camera_only": True})
+        return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
+                       info={"camera_only": True}, run=node.run)
     config = sim_config(args, tables, urls=(args.mavlink or mission.mavlink_url(vehicle),))
     speed = mission.speed if args.speed is None else args.speed
     try:
         node = SimNode(session, vehicle, config, speed=speed, duration=args.duration)
     except OSError as exc:  # the MAVLink port is taken or the address is wrong
         raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
-    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, node.run,
-                   info=node.describe())
+    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, info=node.describe(),
+                   run=node.run)
 
 
 _BUILDERS: dict[str, Callable[..., Running]] = {"map-server": _map_server, "depth": _depth, "decide": _decide,
@@ -176,13 +172,13 @@ _BUILDERS: dict[str, Callable[..., Running]] = {"map-server": _map_server, "dept
 
 def _router(args: argparse.Namespace) -> int:
     from layerpilot.bus.session import open_session
-    from layerpilot.nodes.runner import bus_config, load_tables, stop_event
+    from layerpilot.nodes.runner import bus_config, load_tables, stop_event, wait_for_stop
 
     stop = stop_event()
     tables = load_tables(args.config) if args.config else {}
     session = open_session(bus_config(tables, args.endpoint, mode="router"))
     _say(node="router", status="ready", zid=str(session.zid()))
-    stop.wait()
+    wait_for_stop(stop)
     session.close()
     return 0
 

@@ -26,6 +26,7 @@ from layerpilot.bus.session import publish
 from layerpilot.config import check_range
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, LinkError
+from layerpilot.nodes.runner import wait_for_stop
 
 _log = logging.getLogger("layerpilot.link")
 
@@ -82,7 +83,7 @@ class LinkNode:
             raise
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
                                                     guarded(decode_waypoint, self._on_waypoint, self.rejects))
-        stop.wait()
+        wait_for_stop(stop)
 
     def _on_waypoint(self, w: Waypoint, key: str) -> None:
         if w.seq == self._last_seq:  # decide repeats its current waypoint until reached

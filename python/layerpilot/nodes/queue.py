@@ -29,11 +29,11 @@ class DropOldest(Generic[T]):
             self._items.append(item)
             self._cond.notify()
 
-    def get(self) -> T | None:
-        """The oldest item, waiting for one; None once closed (the worker then exits)."""
+    def get(self, timeout: float | None = None) -> T | None:
+        """The oldest item, waiting for one; None once closed (the worker then exits) or after ``timeout``."""
         with self._cond:
-            self._cond.wait_for(lambda: self._items or self._closed)
-            return None if self._closed else self._items.popleft()
+            self._cond.wait_for(lambda: self._items or self._closed, timeout)
+            return None if self._closed or not self._items else self._items.popleft()
 
     def close(self) -> None:
         with self._cond:

@@ -27,6 +27,7 @@ def bus_config(tables: dict[str, Any], endpoint: str | None, mode: str | None = 
 
 
 STUCK_AFTER = 10.0  # s after SIGTERM: dump every thread's stack to stderr
+WAKE_PERIOD = 0.2  # s: how often a waiting main thread gets back to the interpreter
 
 
 def stop_event() -> threading.Event:
@@ -43,4 +44,15 @@ def stop_event() -> threading.Event:
     return stop
 
 
-__all__ = ["ConfigError", "bus_config", "load_tables", "stop_event"]
+def wait_for_stop(stop: threading.Event) -> None:
+    """Block the main thread until ``stop`` is set, waking every WAKE_PERIOD.
+
+    The kernel may deliver SIGTERM to any thread of the process, e.g. one of Zenoh's; Python
+    then runs the handler only when the main thread comes back to the interpreter, which a
+    wait without a timeout never does: the node would hang until killed.
+    """
+    while not stop.wait(WAKE_PERIOD):
+        pass
+
+
+__all__ = ["ConfigError", "WAKE_PERIOD", "bus_config", "load_tables", "stop_event", "wait_for_stop"]

@@ -16,6 +16,7 @@ from layerpilot.bus.messages import Frame, State, decode_state, encode_frame, qu
 from layerpilot.bus.reject import Rejects
 from layerpilot.bus.session import publish
 from layerpilot.nodes.queue import DropOldest
+from layerpilot.nodes.runner import WAKE_PERIOD
 
 _log = logging.getLogger("layerpilot.sim")
 
@@ -99,10 +100,10 @@ class CameraOnlyNode:
         renderer = Renderer(world, self.config.camera)
         self._sub = self.session.declare_subscriber(
             self.keys.pose, guarded(decode_state, lambda s, k: self.queue.put(s), self.rejects))
-        threading.Thread(target=lambda: (stop.wait(), self.queue.close()), daemon=True).start()
         try:
-            while (state := self.queue.get()) is not None:
-                if state.stamp < self._next:
+            while not stop.is_set():
+                # the main thread: wake often, so that a SIGTERM caught by another thread is handled
+                if (state := self.queue.get(timeout=WAKE_PERIOD)) is None or state.stamp < self._next:
                     continue
                 self._next = state.stamp + 1.0 / self.config.frame_rate_hz
                 rendered = renderer.render_vehicle(state.position + [0.0, 0.0, lift], yaw_of(state.orientation))

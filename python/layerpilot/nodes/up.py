@@ -7,6 +7,7 @@ whole mission: nodes that die and restart always find the same place to connect 
 from __future__ import annotations
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from pathlib import Path
 from layerpilot.nodes.mission import load_mission, resolve
 
 RESTART_DELAY = 1.0  # s
+CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
 STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL
 
 
@@ -126,14 +128,18 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/", flush=True)
     t0 = time.monotonic()
+    next_status, end = t0 + status_every, math.inf if duration is None else t0 + duration
     try:
-        while not stop.wait(status_every):
+        while not stop.wait(CHECK_PERIOD):  # restarts and the end do not wait for the next status block
             for e in sup.check():
                 print(e, flush=True)
-            print(f"--- t={time.monotonic() - t0:.0f}s", flush=True)
-            for n in sup.nodes:
-                print(n.line(), flush=True)
-            if duration is not None and time.monotonic() - t0 >= duration:
+            now = time.monotonic()
+            if now >= next_status or now >= end:
+                next_status += status_every
+                print(f"--- t={now - t0:.0f}s", flush=True)
+                for n in sup.nodes:
+                    print(n.line(), flush=True)
+            if now >= end:
                 break
     finally:
         sup.stop()
