@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -66,8 +67,14 @@ class Running:
     run: Callable[[threading.Event], None] | None = None
 
 
+_SAY_LOCK = threading.Lock()
+
+
 def _say(**fields: Any) -> None:
-    print(json.dumps(fields), flush=True)
+    """One JSON line, written whole: the status ticker and the main thread must not interleave."""
+    with _SAY_LOCK:
+        sys.stdout.write(json.dumps(fields) + "\n")
+        sys.stdout.flush()
 
 
 def _run_node(args: argparse.Namespace) -> int:
