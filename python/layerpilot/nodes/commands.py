@@ -94,6 +94,8 @@ def _run_node(args: argparse.Namespace) -> int:
         ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, node.status), daemon=True)
         ticker.start()
         (node.run or wait_for_stop)(stop)
+        stop.set()  # also when run() ended by itself (sim --duration): the ticker stops before the last line
+        ticker.join()
         node.stop()
         _say(node=args.role, vehicle=vehicle, status="stopped", **node.status())
     finally:
