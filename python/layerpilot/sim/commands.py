@@ -53,7 +53,7 @@ def sim_config(args: argparse.Namespace, tables: dict[str, Any], **overrides: An
     config = from_dict(SimConfig, tables.get("sim", {}), "sim")
     if args.seed is not None:
         config = dataclasses.replace(config, world=dataclasses.replace(config.world, seed=args.seed))
-    given = {"frame_rate_hz": args.rate, "flavour": getattr(args, "flavour", None), **overrides}
+    given = {"frame_rate_hz": args.rate, "flavour": args.flavour, **overrides}
     return dataclasses.replace(config, **{k: v for k, v in given.items() if v is not None})
 
 
