@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from layerpilot.eval.metrics import disk_mask
-from layerpilot.eval.plots import plot_flight_path, plot_layer, plot_metric
+from layerpilot.eval.pictures.plots import plot_flight_path, plot_layer, plot_metric
 from layerpilot.eval.series import MetricSeries
 from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers

@@ -8,11 +8,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from layerpilot.bench.decide import print_decide_bench, run_decide_bench, synthetic_columns
 from layerpilot.cli import main
 from layerpilot.decide import DecisionMaker, load_behavior
-from layerpilot.decide.bench import print_decide_bench, run_decide_bench, synthetic_columns
+from layerpilot.eval.pictures.layers import render
 from layerpilot.layers import LayerContext, compute_layers
-from layerpilot.layers.render import render
 from layerpilot.map import VoxelMap
 
 

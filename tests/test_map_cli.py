@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from layerpilot.bench.map import print_map_bench, run_map_bench
 from layerpilot.cli import main
 from layerpilot.map import VoxelMap
-from layerpilot.map.bench import print_map_bench, run_map_bench
 from layerpilot.map.synthetic import survey_frames
 
 

@@ -143,7 +143,7 @@ def test_daemon_process_serves_and_exits_on_sigterm(tmp_path):
 
 
 def test_bench_bus_runs_small():
-    from layerpilot.nodes.bench import run
+    from layerpilot.bench.bus import run
 
     r = run(seconds=0.3, rate=10.0, width=32, height=24, queries=3, window=64)
     assert r["clouds_sent"] == 3 and r["clouds_inserted"] + r["clouds_dropped"] == 3

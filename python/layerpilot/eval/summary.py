@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from layerpilot.eval.plots import LABELS, plot_flight_path, plot_layer, plot_metric
+from layerpilot.eval.pictures.plots import LABELS, plot_flight_path, plot_layer, plot_metric
 from layerpilot.eval.report import Report, format_value
 from layerpilot.eval.series import MetricSeries
 from layerpilot.map.columns import ColumnLayers

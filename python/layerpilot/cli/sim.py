@@ -1,4 +1,4 @@
-"""Simulator commands: `layerpilot sim` (the simulator node), `layerpilot sim preview`, `layerpilot bench sim`."""
+"""Simulator commands: `layerpilot sim` (the simulator node), `layerpilot sim preview`."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from layerpilot.nodes.commands import add_node_command
+from layerpilot.cli.nodes import Running, add_node_command
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = add_node_command(commands, "sim", "the simulator node: MAVLink vehicle + camera frames on the bus; "
+def register(commands: argparse._SubParsersAction) -> None:
+    p = add_node_command(commands, "sim", _node, "the simulator node: MAVLink vehicle + camera frames on the bus; "
                          "or an action (preview)",
                          "Without an action: serve the mission's simulated vehicle on MAVLink and publish "
                          "its camera frames on the bus (with camera_only = true: render the pose a real "
@@ -32,11 +32,6 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     pv.add_argument("--out", type=Path, default=Path("runs/sim_preview.png"))
     pv.set_defaults(func=_preview)
 
-    b = benches.add_parser("sim", help="camera rendering frames per second at 640x480 and 320x240")
-    b.add_argument("--frames", type=int, default=40)
-    b.add_argument("--seed", type=int, default=0)
-    b.set_defaults(func=lambda a: __import__("layerpilot.sim.bench", fromlist=["main"]).main(a.frames, a.seed))
-
 
 def _world_args(p: argparse.ArgumentParser, default: Any = None) -> None:
     p.add_argument("--seed", type=int, default=default, help="world seed (default: the mission's)")
@@ -57,9 +52,26 @@ def sim_config(args: argparse.Namespace, tables: dict[str, Any], **overrides: An
     return dataclasses.replace(config, **{k: v for k, v in given.items() if v is not None})
 
 
+def _node(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.nodes.sim import CameraOnlyNode, SimNode
+
+    if mission.camera_only:
+        node = CameraOnlyNode(session, vehicle, sim_config(args, tables))
+        return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
+                       info={"camera_only": True}, run=node.run)
+    config = sim_config(args, tables, urls=(args.mavlink or mission.mavlink_url(vehicle),))
+    speed = mission.speed if args.speed is None else args.speed
+    try:
+        node = SimNode(session, vehicle, config, speed=speed, duration=args.duration)
+    except OSError as exc:  # the MAVLink port is taken or the address is wrong
+        raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
+    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, info=node.describe(),
+                   run=node.run)
+
+
 def _preview(args: argparse.Namespace) -> None:
     from layerpilot.nodes.mission import load_mission
-    from layerpilot.sim.preview import write_preview
+    from layerpilot.eval.pictures.sim_preview import write_preview
     from layerpilot.sim.world import World
 
     config = sim_config(args, load_mission(args.config)[1])

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from layerpilot.eval.pictures.layers import render
 from layerpilot.layers.registry import LayerContext, compute_layers, layer_names
-from layerpilot.layers.render import render
 
 
 def render_scene(

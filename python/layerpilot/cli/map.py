@@ -1,4 +1,4 @@
-"""Map commands: `layerpilot map info|scan`, `layerpilot bench map`."""
+"""Map commands: `layerpilot map info|scan`."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
+def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("map", help="voxel map files and tools")
     sub = p.add_subparsers(dest="map_command", required=True, metavar="ACTION")
     info = sub.add_parser("info", help="print statistics of a .ot/.bt map")
@@ -18,11 +18,6 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     scan.add_argument("--resolution", type=float, default=0.2)
     scan.set_defaults(func=_scan)
 
-    b = benches.add_parser("map", help="insertion speed vs OctoMap, agreement, column layers, memory")
-    b.add_argument("--frames", type=int, default=6)
-    b.add_argument("--seed", type=int, default=0)
-    b.set_defaults(func=lambda a: __import__("layerpilot.map.bench", fromlist=["main"]).main(a.frames, a.seed))
-
 
 def _info(args: argparse.Namespace) -> None:
     from layerpilot.map import VoxelMap
@@ -32,7 +27,7 @@ def _info(args: argparse.Namespace) -> None:
 
 
 def _scan(args: argparse.Namespace) -> None:
-    from layerpilot.map.scan_demo import build_scan_map
+    from layerpilot.eval.pictures.scan import build_scan_map
 
     for path in build_scan_map(args.scan, args.out, args.resolution):
         print(f"wrote {path}")

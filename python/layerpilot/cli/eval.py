@@ -8,8 +8,6 @@ import warnings
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
-
 BEHAVIORS = ["balanced", "exploration", "time", "distance", "lawnmower", "orbit"]
 
 
@@ -25,7 +23,7 @@ def _mission_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("runs"), help="parent directory of the run directory")
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
+def register(commands: argparse._SubParsersAction) -> None:
     demo = commands.add_parser("demo", help="fly one scored simulated mission and write its report")
     demo.add_argument("--behavior", default="balanced", help=f"preset, .toml path, or baseline ({', '.join(BEHAVIORS)})")
     demo.add_argument("--seed", type=int, default=0, help="decision seed")
@@ -56,7 +54,7 @@ def _config(args: argparse.Namespace, behavior: str, seed: int):
 
 
 def _table(rows: dict[str, dict[str, float]]) -> str:
-    from layerpilot.eval.plots import LABELS
+    from layerpilot.eval.pictures.plots import LABELS
     from layerpilot.eval.report import format_value
 
     names = [k for k in next(iter(rows.values())) if k != "t"]
@@ -90,6 +88,8 @@ def _one(cfg, run_dir: str) -> tuple[str, dict[str, float], float]:
 def _study(args: argparse.Namespace) -> None:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    import numpy as np
 
     from layerpilot.eval.mission import BASELINES
     from layerpilot.eval.summary import write_study_report

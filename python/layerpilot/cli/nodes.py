@@ -1,9 +1,9 @@
-"""Node processes: `layerpilot map-server|sim|link|depth|decide`, `layerpilot router`,
-`layerpilot up`; `layerpilot bench bus`.
+"""Node processes: `layerpilot map-server|decide`, `layerpilot router`, `layerpilot up`, and
+``add_node_command``, how every `layerpilot ROLE` runs its bus node in this process.
 
-`sim`, `link` and `depth` also have actions of their own (`layerpilot sim preview`,
-`layerpilot link takeoff 20`, `layerpilot depth preview`); without an action they run
-their bus node. Every node reads the mission file (``--config``: a path or a name in
+`sim`, `link` and `depth` (cli.sim, cli.link, cli.depth) add their node commands here too,
+with actions of their own (`layerpilot sim preview`, `layerpilot link takeoff 20`,
+`layerpilot depth preview`); without an action they run their bus node. Every node reads the mission file (``--config``: a path or a name in
 config/missions/), prints one JSON line when ready and a JSON status line every
 ``--status-every`` seconds, and on SIGTERM/SIGINT finishes its current message, prints a
 last status line and exits 0.
@@ -19,11 +19,11 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = add_node_command(commands, "map-server",
+def register(commands: argparse._SubParsersAction) -> None:
+    p = add_node_command(commands, "map-server", _map_server,
                          "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)")
     p.add_argument("--snapshot", help="snapshot .ot path (reloaded at start); '' for none")
-    add_node_command(commands, "decide", "layer sets + pose in, decisions and waypoints out")
+    add_node_command(commands, "decide", _decide, "layer sets + pose in, decisions and waypoints out")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
@@ -38,21 +38,17 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
     p.set_defaults(func=_up)
 
-    b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
-    b.add_argument("--seconds", type=float, default=5.0, help="seconds of clouds to send")
-    b.add_argument("--rate", type=float, default=10.0, help="clouds per second offered")
-    b.set_defaults(func=_bench_bus)
 
-
-def add_node_command(commands: argparse._SubParsersAction, role: str, help: str,
+def add_node_command(commands: argparse._SubParsersAction, role: str, build: Builder, help: str,
                      description: str | None = None) -> argparse.ArgumentParser:
-    """`layerpilot ROLE` running the role's bus node; the caller adds the role's own options."""
+    """`layerpilot ROLE` running the role's bus node, started by ``build(args, mission, tables, vehicle,
+    session)``; the caller adds the role's own options."""
     p = commands.add_parser(role, help=help, description=description or help)
     p.add_argument("--config", help="mission file or name in config/missions/ (default: default)")
     p.add_argument("--vehicle", default=None, help="vehicle name (default: the mission's first)")
     p.add_argument("--endpoint", help="Zenoh endpoint (default: the mission's, tcp/127.0.0.1:7447)")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between JSON status lines")
-    p.set_defaults(func=_run_node, role=role)
+    p.set_defaults(func=_run_node, role=role, build=build)
     return p
 
 
@@ -66,6 +62,8 @@ class Running:
     info: dict[str, Any] = field(default_factory=dict)
     run: Callable[[threading.Event], None] | None = None
 
+
+Builder = Callable[..., Running]
 
 _SAY_LOCK = threading.Lock()
 
@@ -89,7 +87,7 @@ def _run_node(args: argparse.Namespace) -> int:
     stop = stop_event()
     session = open_session(bus_config(tables, args.endpoint))
     try:
-        node = _BUILDERS[args.role](args, mission, tables, vehicle, session)
+        node = args.build(args, mission, tables, vehicle, session)
         _say(node=args.role, vehicle=vehicle, status="ready", **node.info)
         ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, node.status), daemon=True)
         ticker.start()
@@ -125,17 +123,6 @@ def _map_server(args, mission, tables, vehicle, session) -> Running:
                    node.stop, {"snapshot": node.cfg.snapshot})
 
 
-def _depth(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.config import from_dict
-    from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
-
-    node = DepthNode(session, vehicle, from_dict(DepthNodeConfig, tables.get("depth", {}), "depth"))
-    node.start()
-    q = node.queue
-    return Running(lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
-                            "rejected": node.rejects.total}, node.stop, {"source": node.cfg.source})
-
-
 def _decide(args, mission, tables, vehicle, session) -> Running:
     from layerpilot.config import from_dict
     from layerpilot.nodes.decide import DecideConfig, DecideNode
@@ -145,38 +132,6 @@ def _decide(args, mission, tables, vehicle, session) -> Running:
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
                    node.stop, {"behavior": node.cfg.behavior})
-
-
-def _link(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.link.commands import link_node_config
-    from layerpilot.nodes.link import LinkNode
-
-    node = LinkNode(session, vehicle, link_node_config(args, mission, tables, vehicle))
-    return Running(lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
-                            "telemetry": node.link.telemetry().line()}, node.stop,
-                   {"mavlink": node.cfg.link.url}, node.run)
-
-
-def _sim(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.nodes.sim import CameraOnlyNode, SimNode
-    from layerpilot.sim.commands import sim_config
-
-    if mission.camera_only:
-        node = CameraOnlyNode(session, vehicle, sim_config(args, tables))
-        return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
-                       info={"camera_only": True}, run=node.run)
-    config = sim_config(args, tables, urls=(args.mavlink or mission.mavlink_url(vehicle),))
-    speed = mission.speed if args.speed is None else args.speed
-    try:
-        node = SimNode(session, vehicle, config, speed=speed, duration=args.duration)
-    except OSError as exc:  # the MAVLink port is taken or the address is wrong
-        raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
-    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, info=node.describe(),
-                   run=node.run)
-
-
-_BUILDERS: dict[str, Callable[..., Running]] = {"map-server": _map_server, "depth": _depth, "decide": _decide,
-                                                "link": _link, "sim": _sim}
 
 
 def _router(args: argparse.Namespace) -> int:
@@ -198,8 +153,3 @@ def _up(args: argparse.Namespace) -> int:
     return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
               log_dir=args.log_dir)
 
-
-def _bench_bus(args: argparse.Namespace) -> int:
-    from layerpilot.nodes.bench import main
-
-    return main(args.seconds, args.rate)

@@ -1,4 +1,4 @@
-"""Layer and decision commands: `layerpilot layers render|list`, `layerpilot bench decide`."""
+"""Layer and decision commands: `layerpilot layers render|list`."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
+def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("layers", help="feature layers and decisions: pictures, registered layers")
     sub = p.add_subparsers(dest="layers_command", required=True, metavar="ACTION")
     r = sub.add_parser("render", help="PNGs of every layer and of A0..A3 with the chosen waypoint")
@@ -22,15 +22,9 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     ls.add_argument("--behavior", help="also load this behavior's plugins")
     ls.set_defaults(func=_list)
 
-    b = benches.add_parser("decide", help="layers + decision time on 512x512 and 1024x1024 grids")
-    b.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
-    b.add_argument("--repeat", type=int, default=30)
-    b.add_argument("--behavior", default="balanced")
-    b.set_defaults(func=_bench)
-
 
 def _render(args: argparse.Namespace) -> None:
-    from layerpilot.layers.scene import render_scene
+    from layerpilot.eval.pictures.scene import render_scene
 
     for path in render_scene(args.behavior, args.out, map_path=args.map, position=args.position,
                              home=tuple(args.home), now=args.now, frames=args.frames):
@@ -45,9 +39,3 @@ def _list(args: argparse.Namespace) -> None:
 
         load_behavior(args.behavior)
     print("\n".join(layer_names()))
-
-
-def _bench(args: argparse.Namespace) -> None:
-    from layerpilot.decide.bench import print_decide_bench, run_decide_bench
-
-    print_decide_bench(run_decide_bench(args.sizes, args.repeat, args.behavior))

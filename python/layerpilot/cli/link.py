@@ -6,11 +6,11 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from layerpilot.nodes.commands import add_node_command
+from layerpilot.cli.nodes import Running, add_node_command
 
 
-def register(commands: argparse._SubParsersAction, benches: argparse._SubParsersAction) -> None:
-    p = add_node_command(commands, "link", "MAVLink flight link (ArduPilot GUIDED, PX4 OFFBOARD): the link node, "
+def register(commands: argparse._SubParsersAction) -> None:
+    p = add_node_command(commands, "link", _node, "MAVLink flight link (ArduPilot GUIDED, PX4 OFFBOARD): the link node, "
                          "or an action (goto, takeoff, land, rtl)",
                          "Without an action: the link node, flying the bus's waypoints and publishing the pose. "
                          "With one: connect, do it, wait until done, print the telemetry.")
@@ -32,6 +32,15 @@ def register(commands: argparse._SubParsersAction, benches: argparse._SubParsers
     sub.add_parser("rtl", help="return to launch and wait until it disarms")
     for action in sub.choices.values():
         action.set_defaults(func=_act)
+
+
+def _node(args, mission, tables, vehicle, session) -> Running:
+    from layerpilot.nodes.link import LinkNode
+
+    node = LinkNode(session, vehicle, link_node_config(args, mission, tables, vehicle))
+    return Running(lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
+                            "telemetry": node.link.telemetry().line()}, node.stop,
+                   {"mavlink": node.cfg.link.url}, node.run)
 
 
 def link_node_config(args: argparse.Namespace, mission, tables: dict[str, Any], vehicle: str):

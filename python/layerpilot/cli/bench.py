@@ -1,0 +1,71 @@
+"""`layerpilot bench map|decide|depth|sim|bus`: every speed claim against its reference (layerpilot.bench)."""
+
+from __future__ import annotations
+
+import argparse
+
+from layerpilot.cli.depth import size
+
+
+def register(commands: argparse._SubParsersAction) -> None:
+    bench = commands.add_parser("bench", help="speed measurements side by side with the reference")
+    benches = bench.add_subparsers(dest="bench", required=True, metavar="WHAT")
+
+    b = benches.add_parser("map", help="insertion speed vs OctoMap, agreement, column layers, memory")
+    b.add_argument("--frames", type=int, default=6)
+    b.add_argument("--seed", type=int, default=0)
+    b.set_defaults(func=_map)
+
+    b = benches.add_parser("decide", help="layers + decision time on 512x512 and 1024x1024 grids")
+    b.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
+    b.add_argument("--repeat", type=int, default=30)
+    b.add_argument("--behavior", default="balanced")
+    b.set_defaults(func=_decide)
+
+    b = benches.add_parser("depth", help="stereo precision, coverage, error and pairs/s on rendered pairs")
+    b.add_argument("--sizes", type=lambda t: [size(s) for s in t.split(",")], default=[(640, 480), (320, 240)])
+    b.add_argument("--repeats", type=int, default=3)
+    b.add_argument("--seed", type=int, default=0)
+    b.set_defaults(func=_depth)
+
+    b = benches.add_parser("sim", help="camera rendering frames per second at 640x480 and 320x240")
+    b.add_argument("--frames", type=int, default=40)
+    b.add_argument("--seed", type=int, default=0)
+    b.set_defaults(func=_sim)
+
+    b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
+    b.add_argument("--seconds", type=float, default=5.0, help="seconds of clouds to send")
+    b.add_argument("--rate", type=float, default=10.0, help="clouds per second offered")
+    b.set_defaults(func=_bus)
+
+
+def _map(args: argparse.Namespace) -> None:
+    from layerpilot.bench.map import main
+
+    main(args.frames, args.seed)
+
+
+def _decide(args: argparse.Namespace) -> None:
+    from layerpilot.bench.decide import print_decide_bench, run_decide_bench
+
+    print_decide_bench(run_decide_bench(args.sizes, args.repeat, args.behavior))
+
+
+def _depth(args: argparse.Namespace) -> None:
+    from layerpilot.bench.depth import main
+
+    if args.repeats < 1:
+        raise ValueError(f"--repeats must be >= 1, got {args.repeats}")
+    main(args.sizes, args.repeats, args.seed)
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from layerpilot.bench.sim import main
+
+    return main(args.frames, args.seed)
+
+
+def _bus(args: argparse.Namespace) -> int:
+    from layerpilot.bench.bus import main
+
+    return main(args.seconds, args.rate)
