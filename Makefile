@@ -6,6 +6,9 @@ APT_PACKAGES := g++ make cmake git python3 python3-venv python3-dev \
 VENV := .venv
 PY := $(VENV)/bin/python
 SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*) $(wildcard config/*/*)
+# The editable install maps each Python module to its file: a module added, moved or removed
+# changes its folder's time, and the install is redone.
+PACKAGE_DIRS := $(shell find python/layerpilot -type d -not -name __pycache__)
 
 .PHONY: demo test system build clean
 
@@ -13,7 +16,7 @@ demo: build
 	$(VENV)/bin/layerpilot demo
 
 test: build
-	$(PY) -m pytest -q
+	$(VENV)/bin/lint-imports && $(PY) -m pytest -q
 
 build: system $(VENV)/.installed
 
@@ -25,7 +28,7 @@ system:
 	  apt-get update -qq && apt-get -o DPkg::Lock::Timeout=120 install -y -qq $$missing; \
 	fi
 
-$(VENV)/.installed: $(SOURCES)
+$(VENV)/.installed: $(SOURCES) $(PACKAGE_DIRS)
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
