@@ -72,14 +72,19 @@ def test_urls_and_config_errors_name_the_key():
     assert parse_url("serial:/dev/ttyUSB0") == ("/dev/ttyUSB0", 57600)
     with pytest.raises(ValueError, match="url"):
         parse_url("http://drone")
-    cfg = from_dict(LinkConfig, {"url": "udpin:0.0.0.0:14540", "area": [-200, -200, 200, 200],
-                                 "long_loss_action": "rtl"}, "link")
-    assert cfg.area == (-200.0, -200.0, 200.0, 200.0)
+    with pytest.raises(ValueError, match=r"port 99999 is out of range \(0-65535\)"):
+        parse_url("tcp:127.0.0.1:99999")
+    cfg = from_dict(LinkConfig, {"url": "udpin:0.0.0.0:14540", "long_loss_action": "rtl"}, "link")
+    assert cfg.long_loss_action == "rtl"
+    with pytest.raises(ConfigError, match=r"^url: port 99999 is out of range"):
+        from_dict(LinkConfig, {"url": "tcp:127.0.0.1:99999"}, "link")
+    with pytest.raises(ConfigError, match="link.area"):  # where the vehicle may go is the mission's geofence
+        from_dict(LinkConfig, {"area": [-200, -200, 200, 200]}, "link")
     with pytest.raises(ConfigError, match="link.heartbeat_timout_s"):
         from_dict(LinkConfig, {"heartbeat_timout_s": 3}, "link")
     with pytest.raises(ConfigError, match="setpoint_period_s"):
         LinkConfig(setpoint_period_s=0.6)
-    with pytest.raises(ConfigError, match="area"):
-        LinkConfig(area=(10.0, 0.0, -10.0, 5.0))
+    with pytest.raises(ConfigError, match="url: expected tcp:HOST:PORT"):
+        LinkConfig(url="localhost")
     with pytest.raises(ConfigError, match="long_loss_action"):
         LinkConfig(long_loss_action="explode")

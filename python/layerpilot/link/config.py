@@ -2,7 +2,9 @@
 
 Times are wall-clock seconds (they guard a real radio link); lengths are metres
 in the map frame (ENU). Loaded from the ``[link]`` table of a mission file with
-:func:`layerpilot.config.from_dict`, so a wrong key or value names itself.
+:func:`layerpilot.config.from_dict`, so a wrong key or value names itself. Where the
+vehicle may go is not a setting here: the geofence (:mod:`layerpilot.link.geofence`)
+is built from the mission and given to the link.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from layerpilot.config import ConfigError, check_range
+from layerpilot.link.connection import parse_url
 
 
 @dataclass(frozen=True)
@@ -35,8 +38,7 @@ class LinkConfig:
     arrival_tolerance_m: float = 1.0
     arrival_hold_s: float = 1.0
     telemetry_rate_hz: float = 10.0
-    area: tuple[float, float, float, float] | None = None  # x_min, y_min, x_max, y_max (map frame)
-    alt_min_m: float = 2.0            # waypoint height above home
+    alt_min_m: float = 2.0            # waypoint height above home (the mission's geofence takes it)
     alt_max_m: float = 120.0
 
     def __post_init__(self) -> None:
@@ -54,7 +56,9 @@ class LinkConfig:
         check_range("arrival_hold_s", self.arrival_hold_s, 0.0, None)
         if self.long_loss_action not in ("none", "rtl", "land"):
             raise ConfigError(f"long_loss_action: expected 'none', 'rtl' or 'land', got {self.long_loss_action!r}")
-        if self.area is not None and not (self.area[0] < self.area[2] and self.area[1] < self.area[3]):
-            raise ConfigError(f"area: expected x_min < x_max and y_min < y_max, got {self.area}")
+        try:
+            parse_url(self.url, self.baud)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
         if not self.alt_min_m < self.alt_max_m:
             raise ConfigError(f"alt_min_m: must be below alt_max_m ({self.alt_min_m} >= {self.alt_max_m})")

@@ -10,8 +10,12 @@ Failsafes:
     new waypoints raise :class:`LinkLost`, a running :meth:`goto` waits; when the
     link returns it resumes (or commands RTL/LAND if the loss lasted longer than
     ``long_loss_s`` and ``long_loss_action`` says so);
-  * a waypoint outside ``area`` or the altitude limits raises :class:`WaypointRefused`
-    before anything is sent;
+  * a waypoint outside the geofence (:class:`~layerpilot.link.geofence.Geofence`: the
+    mission's area of interest plus a margin, and its altitude limits) raises
+    :class:`WaypointRefused` before anything is sent, whoever asked (set_waypoint, goto,
+    takeoff), and is counted in ``refused``; the worker checks every setpoint again right
+    before it goes out. Without a fence (library and bench use only; every mission path
+    gives one) the altitude limits of the config still apply;
   * a rejected COMMAND_ACK raises :class:`CommandRejected` naming the MAV_RESULT
     (and is reported even when nobody waits for it);
   * a mode change away from GUIDED/OFFBOARD made by someone else pauses the link
@@ -26,6 +30,7 @@ import logging
 import math
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
@@ -35,6 +40,7 @@ from layerpilot.link import modes
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import attitude_ned_to_enu, enu_to_ned, ned_to_enu, yaw_enu_to_ned
+from layerpilot.link.geofence import Geofence, OutsideGeofence, check_altitude, check_finite
 from layerpilot.link.telemetry import Telemetry
 
 log = logging.getLogger("layerpilot.link")
@@ -72,18 +78,25 @@ class CommandRejected(LinkError):
 
 
 class WaypointRefused(LinkError, ValueError):
-    """A waypoint outside the area of interest or the altitude limits; nothing was sent."""
+    """A waypoint outside the geofence (area or altitude) or not finite; nothing was sent.
+    ``kind``: ``not finite``, ``outside the area`` or ``altitude``."""
+
+    def __init__(self, message: str, kind: str) -> None:
+        super().__init__(message)
+        self.kind = kind
 
 
 class FlightLink:
     """A companion-computer MAVLink link to one autopilot. Use as a context manager or call close()."""
 
     def __init__(self, config: LinkConfig | None = None, clock: Callable[[], float] = time.monotonic,
-                 on_event: Callable[[str], None] | None = None) -> None:
+                 on_event: Callable[[str], None] | None = None, geofence: Geofence | None = None) -> None:
         self.config = config if config is not None else LinkConfig()
+        self.geofence = geofence
         self.clock = clock
         self.on_event = on_event
         self.events: list[str] = []
+        self.refused: Counter[str] = Counter()  # refused waypoints by kind (see WaypointRefused)
         self._send_lock = threading.Lock()
         self._conn = None
         self._connection_error = ""
@@ -266,6 +279,15 @@ class FlightLink:
         else:
             self.goto(*check, timeout=timeout)
 
+    def check_waypoint(self, x: float, y: float, z: float) -> np.ndarray:
+        """The map-frame waypoint as an array if the geofence allows it, else :class:`WaypointRefused`
+        (counted in ``refused``). Sends nothing."""
+        return self._check_waypoint(x, y, z)
+
+    @property
+    def refused_total(self) -> int:
+        return sum(self.refused.values())
+
     def set_waypoint(self, x: float, y: float, z: float, yaw: float | None = None,
                      look_at: tuple[float, float] | None = None, face_waypoint: bool = False) -> np.ndarray:
         """Start flying to map-frame (x, y, z) without waiting; the worker re-sends it. Returns the waypoint.
@@ -314,7 +336,12 @@ class FlightLink:
         self._release(mav.MAV_CMD_NAV_LAND, "LAND", wait, timeout)
 
     def rtl(self, wait: bool = True, timeout: float = 300.0) -> None:
-        """Return to launch and land (NAV_RETURN_TO_LAUNCH); with ``wait``, until it has disarmed."""
+        """Return to launch and land (NAV_RETURN_TO_LAUNCH); with ``wait``, until it has disarmed.
+
+        A disarmed vehicle is on the ground: nothing to return from, LinkError (nothing is sent)."""
+        self._require_link()
+        if not self._armed:
+            raise LinkError(f"RTL: the vehicle is disarmed (on the ground, mode {self._mode}); nothing sent")
         self._release(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, "RTL", wait, timeout)
 
     def command(self, command: int, *params: float) -> None:
@@ -374,18 +401,31 @@ class FlightLink:
         return self._home
 
     def _check_waypoint(self, x: float, y: float, z: float) -> np.ndarray:
-        target = np.array([x, y, z], dtype=np.float64)
-        if not np.all(np.isfinite(target)):
-            raise WaypointRefused(f"waypoint: must be finite, got {target.tolist()}")
-        area = self.config.area
-        if area is not None and not (area[0] <= x <= area[2] and area[1] <= y <= area[3]):
-            raise WaypointRefused(f"waypoint ({x:.1f}, {y:.1f}) is outside the area of interest "
-                                  f"x [{area[0]}, {area[2]}], y [{area[1]}, {area[3]}]; not sent")
-        height = z - self._home_or_error()[2]
-        if not self.config.alt_min_m <= height <= self.config.alt_max_m:
-            raise WaypointRefused(f"waypoint altitude {height:.1f} m above home is outside the limits "
-                                  f"[{self.config.alt_min_m}, {self.config.alt_max_m}] m; not sent")
-        return target
+        """The geofence (or, without one, the config's altitude limits): WaypointRefused, counted."""
+        x, y, z = float(x), float(y), float(z)
+        try:
+            self._fence_check(x, y, z)
+        except OutsideGeofence as exc:
+            self._refuse(exc)
+        return np.array([x, y, z], dtype=np.float64)
+
+    def _fence_check(self, x: float, y: float, z: float) -> None:
+        fence = self.geofence
+        if fence is not None:
+            fence.check_area(x, y, z)  # needs no home: refused even before HOME_POSITION
+        else:
+            check_finite(x, y, z)
+        home_z = float(self._home_or_error()[2])
+        if fence is not None:
+            fence.check(x, y, z, home_z)
+        else:
+            check_altitude(x, y, z, home_z, self.config.alt_min_m, self.config.alt_max_m)
+
+    def _refuse(self, exc: OutsideGeofence) -> None:
+        """Count and raise; the caller reports it (the link node logs each kind once, a command prints it)."""
+        with self._cond:
+            self.refused[exc.kind] += 1
+        raise WaypointRefused(str(exc), exc.kind) from None
 
     def _set_setpoint(self, target: np.ndarray, yaw: float | None, look_at: tuple[float, float] | None,
                       face: bool) -> None:
@@ -430,6 +470,16 @@ class FlightLink:
                 return
             if self.flavour == modes.ARDUPILOT and self._mode != "GUIDED":
                 return
+            dropped = None
+            if not hold:  # the last gate: a setpoint no longer inside (home moved since) is dropped
+                try:
+                    self._fence_check(*target)
+                except (OutsideGeofence, LinkError) as exc:  # LinkError: home unknown (cannot happen once set)
+                    self._setpoint, self._abandoned, dropped = None, f"no longer inside the geofence: {exc}", exc
+                    self.refused[getattr(exc, "kind", "altitude")] += 1
+        if dropped is not None:
+            self._report(f"setpoint dropped: {dropped}")
+            return
         n, e, d = enu_to_ned(*target)
         mask = POSITION_ONLY if yaw is None else POSITION_AND_YAW
         self._transmit(lambda m: m.set_position_target_local_ned_send(
@@ -485,7 +535,7 @@ class FlightLink:
             conn = open_connection(self.config.url, self.config.source_system, self.config.source_component,
                                    self.config.baud)
         except OSError as exc:
-            self._connection_error = str(exc)
+            self._connection_error = exc.strerror or str(exc)  # "Connection refused", not "[Errno 111] ..."
             return
         with self._send_lock:
             self._conn = conn
