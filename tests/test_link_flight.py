@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from layerpilot.cli import main as cli_main
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
+from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import CommandRejected, FlightLink, LinkError, LinkLost, NotReady, WaypointRefused
 from layerpilot.link.relay import MavProxyRelay, free_port
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
@@ -141,16 +142,19 @@ def test_refusals_are_reported_with_the_mav_result_name(vehicle, link):
     link.arm()
     link.takeoff(10.0)
     target = vehicle.vehicle.position_target
-    with FlightLink(LinkConfig(url=url_of(vehicle), source_component=192, area=(-50, -50, 50, 50), **FAST)) as other:
+    with FlightLink(LinkConfig(url=url_of(vehicle), source_component=192, **FAST),
+                    geofence=Geofence.circle((0.0, 0.0), 50.0)) as other:
         other.connect(5.0)
         other.wait_ready()
         other.start_guided()
-        with pytest.raises(WaypointRefused, match="outside the area of interest"):
+        with pytest.raises(WaypointRefused, match="outside the geofence"):
             other.goto(80.0, 0.0, 12.0)
         with pytest.raises(WaypointRefused, match="altitude 150.0 m above home is outside"):
             other.goto(0.0, 0.0, 152.0)
         with pytest.raises(WaypointRefused, match="finite"):
             other.goto(0.0, float("nan"), 12.0)
+    with pytest.raises(WaypointRefused, match="altitude 150.0 m above home is outside the limits"):
+        link.goto(0.0, 0.0, 152.0)  # without a fence (bench use) the config's altitude limits still hold
     time.sleep(0.3)
     assert np.array_equal(vehicle.vehicle.position_target, target)
 
@@ -306,7 +310,7 @@ def test_link_flies_through_mavproxy(vehicle):
 def test_command_line(vehicle, capsys):
     url = url_of(vehicle)
     assert cli_main(["link", "--mavlink", url, "--timeout", "10", "goto", "5", "5", "20"]) == 1
-    assert "not armed" in capsys.readouterr().out
+    assert "not armed" in capsys.readouterr().err
     assert cli_main(["link", "--mavlink", url, "takeoff", "12"]) == 0
     assert vehicle.armed and vehicle.pose().position[2] == pytest.approx(14.0, abs=1.1)
     assert cli_main(["link", "--mavlink", url, "--tolerance", "0.5", "goto", "20", "-10", "15", "--yaw", "90"]) == 0

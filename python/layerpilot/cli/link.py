@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from layerpilot.cli.nodes import Running, add_node_command
 
@@ -13,13 +12,16 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = add_node_command(commands, "link", _node, "MAVLink flight link (ArduPilot GUIDED, PX4 OFFBOARD): the link node, "
                          "or an action (goto, takeoff, land, rtl)",
                          "Without an action: the link node, flying the bus's waypoints and publishing the pose. "
-                         "With one: connect, do it, wait until done, print the telemetry.")
+                         "With one: connect, do it, wait until done, print the telemetry.", flags=LINK_FLAGS)
     p.add_argument("--mavlink", metavar="URL",
                    help="tcp:HOST:PORT (ArduPilot SITL 5760), udpin:0.0.0.0:14540 (PX4 SITL), /dev/ttyUSB0:57600 "
                         "(default: the mission's for this vehicle)")
     p.add_argument("--sysid", type=int, help="our MAVLink system id (default 1, like a companion)")
     p.add_argument("--compid", type=int, help="our MAVLink component id (default 191, onboard computer)")
-    p.add_argument("--timeout", type=float, help="seconds to wait for the vehicle to be ready (default 60)")
+    p.add_argument("--timeout", type=float,
+                   help="the longest any one wait may take: the connection, readiness, arming, a mode change "
+                        "and, for an action, the action itself (default: 30 s to connect, 60 s to be ready, "
+                        "10 s to arm, 5 s for a mode, and each action's own bound)")
     p.add_argument("--tolerance", type=float, help="arrival tolerance in metres (default 1)")
     sub = p.add_subparsers(dest="link_command", metavar="ACTION")
     goto = sub.add_parser("goto", help="fly to map-frame X Y Z (ENU metres from the autopilot's local origin)")
@@ -34,63 +36,86 @@ def register(commands: argparse._SubParsersAction) -> None:
         action.set_defaults(func=_act)
 
 
-def _node(args, mission, tables, vehicle, session) -> Running:
+LINK_FLAGS = {"mavlink": "link.link.url", "sysid": "link.link.source_system", "compid": "link.link.source_component",
+              "timeout": ("link.link.connect_timeout_s", "link.link.ready_timeout_s", "link.link.arm_timeout_s",
+                          "link.link.mode_timeout_s"),
+              "tolerance": "link.link.arrival_tolerance_m"}
+
+
+def _node(args, mission, vehicle, session) -> Running:
+    from layerpilot.mission.build import geofence_for
     from layerpilot.nodes.link import LinkNode
 
-    node = LinkNode(session, vehicle, link_node_config(args, mission, tables, vehicle))
-    return Running(lambda: {"waypoints": node.waypoints, "rejected": node.rejects.total,
-                            "telemetry": node.link.telemetry().line()}, node.stop,
-                   {"mavlink": node.cfg.link.url}, node.run)
+    node = LinkNode(session, vehicle, link_settings(args, mission, vehicle), geofence_for(mission))
+    link = node.link
+
+    def status() -> dict:
+        return {"phase": node.phase, "waypoints": node.waypoints, "rejected": node.rejects.total,
+                "refused": dict(link.refused),  # by the geofence, per kind
+                "telemetry": link.telemetry().line() if link.flavour else "no autopilot heard yet"}
+
+    return Running(status, node.stop, {"mavlink": node.cfg.link.url, "geofence": link.geofence.describe()},
+                   node.run, supervisor=node.supervisor, ready=node.connected)
 
 
-def link_node_config(args: argparse.Namespace, mission, tables: dict[str, Any], vehicle: str):
-    """The mission's ``[link]`` table with the command line's overrides.
+def link_settings(args: argparse.Namespace, mission, vehicle: str):
+    """The mission's link settings; the autopilot's URL is --mavlink, else for a camera-only mission
+    the real autopilot's (``[link.link].url``), else this vehicle's simulator."""
+    import dataclasses
 
-    The autopilot's URL: --mavlink, else for a camera-only mission the real autopilot's
-    (``[link.link].url``), else this vehicle's simulator.
-    """
-    from layerpilot.config import from_dict
-    from layerpilot.nodes.link import LinkNodeConfig
-
-    data = dict(tables.get("link", {}))
-    link = dict(data.get("link", {}))
-    if args.mavlink or not mission.camera_only:
-        link["url"] = args.mavlink or mission.mavlink_url(vehicle)
-    given = {"source_system": args.sysid, "source_component": args.compid, "ready_timeout_s": args.timeout,
-             "arrival_tolerance_m": args.tolerance}
-    data["link"] = {**link, **{k: v for k, v in given.items() if v is not None}}
-    return from_dict(LinkNodeConfig, data, "link")
+    settings = mission.link
+    if not args.mavlink and not mission.camera_only:
+        settings = dataclasses.replace(settings, link=dataclasses.replace(settings.link,
+                                                                          url=mission.mavlink_url(vehicle)))
+    return settings
 
 
 def _act(args: argparse.Namespace) -> int:
+    """One action; every wait is bounded by --timeout when given. Exit 0 when done, 1 with one line on
+    stderr when the vehicle or the link refused or timed out (2 for a bad flag, from main)."""
+    import dataclasses
     import math
+    import sys
 
+    from layerpilot.cli.nodes import mission_from_args
     from layerpilot.link.link import FlightLink, LinkError
-    from layerpilot.nodes.mission import load_mission
+    from layerpilot.mission.build import geofence_for
 
-    mission, tables = load_mission(args.config)
-    config = link_node_config(args, mission, tables, args.vehicle or mission.vehicles[0]).link
-    with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True)) as link:
+    mission = mission_from_args(args, LINK_FLAGS)
+    config = link_settings(args, mission, args.vehicle or mission.vehicles[0]).link
+    bound = {} if args.timeout is None else {"timeout": args.timeout}
+    if args.timeout is not None:  # a command's COMMAND_ACK tries, all of them together, too
+        config = dataclasses.replace(config, command_timeout_s=min(config.command_timeout_s,
+                                                                   args.timeout / (config.command_retries + 1)))
+    action = args.link_command
+    with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True),
+                    geofence=geofence_for(mission)) as link:
         try:
             link.connect()
             link.wait_ready()
-            if args.link_command == "takeoff":
+            if action == "takeoff":
                 link.start_guided()
                 link.arm()
-                link.takeoff(args.alt)
-            elif args.link_command == "goto":
+                link.takeoff(args.alt, **bound)
+            elif action == "goto":
                 if not link.armed:
                     raise LinkError("the vehicle is not armed: `layerpilot link takeoff ALT` first")
                 link.start_guided()
-                link.goto(args.x, args.y, args.z, yaw=None if args.yaw is None else math.radians(args.yaw))
-            elif args.link_command == "land":
-                link.land()
+                link.goto(args.x, args.y, args.z, yaw=None if args.yaw is None else math.radians(args.yaw),
+                          **bound)
+            elif action == "land" and not link.armed:
+                print(link.telemetry().line(), flush=True)
+                print("land: the vehicle is already on the ground (disarmed); nothing sent")
+                return 0
+            elif action == "land":
+                link.land(**bound)
             else:
-                link.rtl()
+                link.rtl(**bound)  # refused on a disarmed vehicle: on the ground, nothing to return from
         except (LinkError, ValueError) as exc:
-            print(f"layerpilot link: error: {exc}", flush=True)
+            if link.flavour is not None:  # telemetry only from an autopilot actually heard
+                print(link.telemetry().line(), flush=True)
+            print(f"layerpilot link {action}: error: {exc}", file=sys.stderr, flush=True)
             return 1
-        finally:
-            print(link.telemetry().line(), flush=True)
-    print(f"{args.link_command}: done")
+        print(link.telemetry().line(), flush=True)
+    print(f"{action}: done")
     return 0

@@ -4,7 +4,9 @@
 `sim`, `link` and `depth` (cli.sim, cli.link, cli.depth) add their node commands here too,
 with actions of their own (`layerpilot sim preview`, `layerpilot link takeoff 20`,
 `layerpilot depth preview`); without an action they run their bus node. Every node reads the mission file (``--config``: a path or a name in
-config/missions/), prints one JSON line when ready and a JSON status line every
+config/missions/), prints one JSON line when ready (a node that connects to something first,
+the link, prints ``"status": "connecting"`` and then ``"ready"`` once connected; a refused
+connection ends in ``"status": "failed"`` with the error, exit 1) and a JSON status line every
 ``--status-every`` seconds, and on SIGTERM/SIGINT finishes its current message, prints a
 last status line and exits 0.
 """
@@ -21,13 +23,16 @@ from typing import Any, Callable
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = add_node_command(commands, "map-server", _map_server,
-                         "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)")
+                         "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)",
+                         flags={"snapshot": "map_server.snapshot"})
     p.add_argument("--snapshot", help="snapshot .ot path (reloaded at start); '' for none")
     add_node_command(commands, "decide", _decide, "layer sets + pose in, decisions and waypoints out")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
     p.add_argument("--endpoint", help="listen endpoint (default tcp/127.0.0.1:7447)")
+    p.add_argument("--secrets", default="runs/bus-secrets",
+                   help="bus.security on: the mission's credentials and allow-list go here (default runs/bus-secrets)")
     p.set_defaults(func=_router)
 
     p = commands.add_parser("up", help="run a mission: every node as a process, status lines, restarts, clean stop")
@@ -36,20 +41,42 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between status blocks")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
+    p.add_argument("--secrets", help="bus.security on: each node's and the operator's credentials go here "
+                                     "(mode 0700; default <log-dir>/../bus-secrets)")
+    p.add_argument("--operator-can-save", action="store_true",
+                   help="the operator's credentials may also query map/save (bus.operator_can_save)")
     p.set_defaults(func=_up)
 
 
 def add_node_command(commands: argparse._SubParsersAction, role: str, build: Builder, help: str,
-                     description: str | None = None) -> argparse.ArgumentParser:
-    """`layerpilot ROLE` running the role's bus node, started by ``build(args, mission, tables, vehicle,
-    session)``; the caller adds the role's own options."""
+                     description: str | None = None,
+                     flags: dict[str, str | tuple[str, ...]] | None = None) -> argparse.ArgumentParser:
+    """`layerpilot ROLE` running the role's bus node, started by ``build(args, mission, vehicle, session)``;
+    the caller adds the role's own options. ``flags``: option dest -> the mission key it overrides."""
     p = commands.add_parser(role, help=help, description=description or help)
     p.add_argument("--config", help="mission file or name in config/missions/ (default: default)")
     p.add_argument("--vehicle", default=None, help="vehicle name (default: the mission's first)")
     p.add_argument("--endpoint", help="Zenoh endpoint (default: the mission's, tcp/127.0.0.1:7447)")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between JSON status lines")
-    p.set_defaults(func=_run_node, role=role, build=build)
+    p.add_argument("--credentials", help="this node's bus login (a JSON file `layerpilot up` writes into its "
+                                         "secrets directory); without it the node joins as an open peer")
+    p.set_defaults(func=_run_node, role=role, build=build, mission_flags=flags or {})
     return p
+
+
+def mission_from_args(args: argparse.Namespace, flags: dict[str, str | tuple[str, ...]], extra: list | tuple = ()):
+    """The mission file (``--config``) with every given flag in ``flags`` (dest -> mission key, or a
+    tuple of keys the flag sets together) applied.
+
+    ``extra``: more Overrides (a flag that sets several keys). A bad flag value is an error naming
+    the flag (``--rate must be in [0.01, 100.0], got 0.0``).
+    """
+    from layerpilot.mission.config import Override, load_mission
+
+    overrides = [Override("--" + dest.replace("_", "-"), key, getattr(args, dest))
+                 for dest, keys in flags.items() if getattr(args, dest, None) is not None
+                 for key in ((keys,) if isinstance(keys, str) else keys)]
+    return load_mission(getattr(args, "config", None), overrides + list(extra))
 
 
 @dataclass
@@ -61,6 +88,8 @@ class Running:
     stop: Callable[[], None] = lambda: None
     info: dict[str, Any] = field(default_factory=dict)
     run: Callable[[threading.Event], None] | None = None
+    supervisor: Any = None  # nodes.supervise.Supervisor of the node's worker loops, if it has any
+    ready: threading.Event | None = None  # set when the node is ready (link: autopilot heard); None = at once
 
 
 Builder = Callable[..., Running]
@@ -76,29 +105,64 @@ def _say(**fields: Any) -> None:
 
 
 def _run_node(args: argparse.Namespace) -> int:
-    from layerpilot.bus.session import open_session
-    from layerpilot.nodes.mission import load_mission
+    from layerpilot.bus.security import open_node_session
     from layerpilot.nodes.runner import bus_config, stop_event, wait_for_stop
 
-    mission, tables = load_mission(args.config)
+    mission = mission_from_args(args, args.mission_flags)
     vehicle = args.vehicle or mission.vehicles[0]
     if vehicle not in mission.vehicles:
         raise ValueError(f"--vehicle {vehicle!r}: the mission's vehicles are {mission.vehicles}")
     stop = stop_event()
-    session = open_session(bus_config(tables, args.endpoint))
+    session = open_node_session(bus_config(mission.bus, args.endpoint), args.credentials)
     try:
-        node = args.build(args, mission, tables, vehicle, session)
-        _say(node=args.role, vehicle=vehicle, status="ready", **node.info)
-        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, node.status), daemon=True)
+        node = args.build(args, mission, vehicle, session)
+        status = _with_health(node)
+        _say(node=args.role, vehicle=vehicle, status="ready" if node.ready is None else "connecting", **node.info)
+        announcer = threading.Thread(target=_announce_ready, args=(node, stop, args.role, vehicle), daemon=True)
+        announcer.start()
+        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, status), daemon=True)
         ticker.start()
+        if node.supervisor is not None:
+            threading.Thread(target=_watch, args=(node.supervisor, stop), daemon=True).start()
         (node.run or wait_for_stop)(stop)
         stop.set()  # also when run() ended by itself (sim --duration): the ticker stops before the last line
         ticker.join()
+        announcer.join()
         node.stop()
-        _say(node=args.role, vehicle=vehicle, status="stopped", **node.status())
+        failure = node.supervisor.failure if node.supervisor is not None else ""
+        _say(node=args.role, vehicle=vehicle, status="failed" if failure else "stopped",
+             **({"error": failure} if failure else {}), **status())
     finally:
         session.close()
-    return 0
+    return 1 if failure else 0
+
+
+def _announce_ready(node: Running, stop: threading.Event, role: str, vehicle: str) -> None:
+    """A node that must connect first (the link) said ``connecting``; it says ``ready`` only once
+    connected: a node whose connection is refused never says ``ready``."""
+    while node.ready is not None and not stop.is_set():
+        if node.ready.wait(0.2):
+            if not stop.is_set():
+                _say(node=role, vehicle=vehicle, status="ready", **node.info)
+            return
+
+
+def _with_health(node: Running) -> Callable[[], dict]:
+    """The node's counters plus its loops' heartbeat ages and the age of its last input per key."""
+    if node.supervisor is None:
+        return node.status
+    return lambda: {**node.status(), **node.supervisor.status()}
+
+
+def _watch(supervisor, stop: threading.Event) -> None:
+    """Stop the node (non-zero exit, so that `up` restarts it) when a loop failed or stalled."""
+    from layerpilot.nodes.runner import WAKE_PERIOD
+
+    while not stop.wait(WAKE_PERIOD):
+        if stalled := supervisor.stalled():
+            supervisor.fail(f"stalled: no heartbeat from {', '.join(stalled)}")
+        if supervisor.failed.is_set():
+            stop.set()
 
 
 def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, status: Callable[[], dict]) -> None:
@@ -106,42 +170,44 @@ def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, 
         _say(node=args.role, vehicle=vehicle, **status())
 
 
-def _map_server(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.config import from_dict
-    from layerpilot.nodes.map_server import MapServer, MapServerConfig
+def _map_server(args, mission, vehicle, session) -> Running:
+    from layerpilot.nodes.map_server import MapServer
 
-    data = dict(tables.get("map_server", {}))
-    if args.snapshot is not None:
-        data["snapshot"] = args.snapshot
-    node = MapServer(session, from_dict(MapServerConfig, data, "map_server"))
+    node = MapServer(session, mission)
     node.start()
-    c = node.counters
-    return Running(lambda: {"received": c.clouds_received, "inserted": c.clouds_inserted,
-                            "dropped": c.clouds_dropped, "rejected": node.rejects.total,
-                            "layer_sets": c.layer_sets_published, "queries": c.queries_answered,
-                            "snapshots": c.snapshots_written, "leaves": node.map.stats()["leaves"]},
-                   node.stop, {"snapshot": node.cfg.snapshot})
+    q, svc = node.queue, node.service
+    return Running(lambda: {"received": q.received, "inserted": svc.clouds_inserted, "dropped": q.dropped,
+                            "rejected": node.rejects.total, "layer_sets": node.layer_sets_published,
+                            "queries": node.queries_answered, "snapshots": node.snapshots_written,
+                            "leaves": node.map.stats()["leaves"]},
+                   node.stop, {"snapshot": node.cfg.snapshot}, supervisor=node.supervisor)
 
 
-def _decide(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.config import from_dict
-    from layerpilot.nodes.decide import DecideConfig, DecideNode
+def _decide(args, mission, vehicle, session) -> Running:
+    from layerpilot.nodes.decide import DecideNode
 
-    node = DecideNode(session, vehicle, from_dict(DecideConfig, tables.get("decide", {}), "decide"))
+    node = DecideNode(session, vehicle, mission)
     node.start()
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
-                   node.stop, {"behavior": node.cfg.behavior})
+                   node.stop, {"behavior": mission.decide.behavior}, supervisor=node.supervisor)
 
 
 def _router(args: argparse.Namespace) -> int:
+    from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
-    from layerpilot.nodes.runner import bus_config, load_tables, stop_event, wait_for_stop
+    from layerpilot.mission.config import load_mission
+    from layerpilot.nodes.runner import bus_config, stop_event, wait_for_stop
 
     stop = stop_event()
-    tables = load_tables(args.config) if args.config else {}
-    session = open_session(bus_config(tables, args.endpoint, mode="router"))
-    _say(node="router", status="ready", zid=str(session.zid()))
+    mission = load_mission(args.config)
+    bus = bus_config(mission.bus, args.endpoint, mode="router")
+    if bus.security:  # the mission's hub: its users' logins and allow-list, as `up` makes them
+        session, secrets = open_hub(bus, args.secrets, mission.vehicles)
+    else:
+        session, secrets = open_session(bus), None
+    _say(node="router", status="ready", zid=str(session.zid()),
+         **({"secrets": str(secrets.directory)} if secrets else {}))
     wait_for_stop(stop)
     session.close()
     return 0
@@ -151,5 +217,5 @@ def _up(args: argparse.Namespace) -> int:
     from layerpilot.nodes.up import up
 
     return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
-              log_dir=args.log_dir)
+              log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save)
 

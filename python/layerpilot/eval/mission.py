@@ -1,66 +1,51 @@
-"""One scored mission in one process, in lock-step: camera -> stereo -> map -> layers -> decision -> MAVLink -> vehicle.
+"""One scored mission in one process, in lock-step, driving the mission core's step objects.
 
-The simulator's vehicle steps on the mission clock; waypoints reach it through the real
-flight link (``FlightLink``) over MAVLink on a loopback TCP port. Everything the mission
-decides from is a function of the seed: the camera pose and the decision position come
-from the simulated vehicle's state, and waypoints carry an explicit yaw, so the link's
-background re-sends are identical and change nothing.
+camera -> depth service -> map service -> layer set (through the bus codec, as on the wire)
+-> pilot -> MAVLink -> simulated vehicle. The pilot, map service and depth service are the
+very objects the live nodes call (``layerpilot.mission``), built from the same mission file,
+so what the study scores is what flies. Waypoints reach the simulated vehicle through the
+real flight link (``FlightLink``) over MAVLink on a loopback TCP port.
 
-The take-off (connect, pre-arm, GUIDED, arm, NAV_TAKEOFF, all over MAVLink) is paced by
-the link's wall-clock waits and so is not part of the scored mission: when it is done the
-vehicle is placed exactly at the hover point (0, 0, altitude) at rest, and the mission
-clock starts at 0 there. That makes two runs with the same seed identical to the bit.
+The map service publishes a layer set every ``1 / map_server.layers_rate`` mission seconds
+and the pilot steps on every simulator step with the newest one, as the decide node does
+with the newest layer set and pose it heard. Everything is a function of the seeds: the
+take-off (connect, pre-arm, GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's
+wall-clock waits and is not scored; when it is done the vehicle is placed exactly at the
+hover point (0, 0, altitude) at rest and the mission clock starts at 0 there. Two runs with
+the same mission are identical to the bit.
 """
 
 from __future__ import annotations
 
 import json
-import math
+import logging
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
 import numpy as np
 
-from layerpilot.config import check_range
 from layerpilot.eval.metrics import area_metrics, map_voxel_metrics
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
+from layerpilot.mission.config import Mission, to_tables
+from layerpilot.mission.pilot import Command
 from layerpilot.progress import Progress
 
-BASELINES = ("lawnmower", "orbit")
 METRICS = ["percent_mapped", "avg_time_since_observed", "avg_min_distance",
            "paper_recall", "paper_mse", "precision", "recall", "f_score"]
 
 
 @dataclass(frozen=True)
-class MissionConfig:
-    """What to fly and how to simulate it; lengths in metres, times in mission seconds."""
+class PilotInput:
+    """What the pilot looked at when it evaluated the layers: enough to replay its decisions."""
 
-    behavior: str = "balanced"  # a preset or .toml path, or a baseline: lawnmower, orbit
-    duration: float = 600.0
-    seed: int = 0  # decision noise
-    world_seed: int = 0
-    world_size: float = 400.0
-    camera_width: int = 320
-    camera_height: int = 240
-    camera_pitch_deg: float = 60.0
-    frame_rate_hz: float = 1.0
-    step_s: float = 0.05
-    map_resolution: float = 1.0
-    arrival_radius: float = 3.0
-    depth: str = "stereo"  # or "truth": the mission map from ground-truth depth too
-
-    def __post_init__(self) -> None:
-        check_range("duration", self.duration, 1.0, 36000.0)
-        check_range("frame_rate_hz", self.frame_rate_hz, 0.05, 30.0)
-        check_range("step_s", self.step_s, 0.005, 0.5)
-        check_range("map_resolution", self.map_resolution, 0.1, 10.0)
-        check_range("arrival_radius", self.arrival_radius, 0.5, 50.0)
-        if self.depth not in ("stereo", "truth"):
-            raise ValueError(f"depth: expected 'stereo' or 'truth', got {self.depth!r}")
+    time: float
+    position: tuple[float, float, float]
+    layer_set: bytes  # the wire message, exactly as the decide node would receive it
+    command: Command | None  # what the pilot answered
 
 
 @dataclass
@@ -72,47 +57,7 @@ class MissionResult:
     clouds: int
     wall_s: float
     report: dict[str, Path] = field(default_factory=dict)
-
-
-class _Pilot:
-    """Chooses the next waypoint: the MCDM decision maker, or a scripted baseline's list."""
-
-    def __init__(self, cfg: MissionConfig, camera) -> None:
-        from layerpilot.decide import DecisionMaker
-        from layerpilot.decide.behavior import load_behavior
-
-        # Baselines fly the balanced behavior's area and altitude.
-        self.behavior = load_behavior("balanced" if cfg.behavior in BASELINES else cfg.behavior)
-        self.area = self.behavior.area
-        self.altitude = self.behavior.altitude
-        self.script: np.ndarray | None = None  # (N, 4) x, y, z, yaw; flown in a loop
-        self.cruise_speed: float | None = None  # m/s; None = the vehicle's top speed
-        self._next = 0
-        if cfg.behavior in BASELINES:
-            from layerpilot.depth.config import PickConfig
-            from layerpilot.sim import baselines
-
-            radius = self.area.radius
-            if cfg.behavior == "lawnmower":
-                wps = baselines.lawnmower((0.0, 0.0), radius, self.altitude, camera, self.altitude)
-                # straight legs at top speed put frames too far apart for stereo: fly at survey speed
-                self.cruise_speed = baselines.survey_speed(camera, self.altitude, cfg.frame_rate_hz,
-                                                           PickConfig().target_baseline_ratio)
-            else:
-                wps = baselines.orbit((0.0, 0.0), radius, self.altitude)
-            self.script = wps
-        self.maker = None if self.script is not None else DecisionMaker(self.behavior, (0.0, 0.0), seed=cfg.seed)
-
-    def next(self, layers_fn, position: np.ndarray, t: float) -> tuple[np.ndarray, float, dict]:
-        """(waypoint xyz, yaw, record); a script starts over when it is done, as a patrol would."""
-        if self.script is not None:
-            wp = self.script[self._next % len(self.script)]
-            self._next += 1
-            return wp[:3], float(wp[3]), {"time": t, "waypoint": wp[:3].tolist(), "scripted": True}
-        decision = self.maker.decide(layers_fn(), position, t)
-        wp = np.array(decision.waypoint, dtype=np.float64)
-        yaw = math.atan2(wp[1] - position[1], wp[0] - position[0])
-        return wp, yaw, {**decision.to_dict(), "explanation": decision.explain()}
+    pilot_inputs: list[PilotInput] = field(default_factory=list)  # filled when asked to record them
 
 
 def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
@@ -144,6 +89,16 @@ def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
         raise RuntimeError(f"take-off over MAVLink failed: {error[0]}") from error[0]
 
 
+def flight_link(mission: Mission, url: str):
+    """The evaluator's flight link to the simulated vehicle, with the mission's geofence, as the live link
+    node has it. Heartbeats come at 1 Hz of mission time; a slow lock-step frame must not look like a lost link."""
+    from layerpilot.link.config import LinkConfig
+    from layerpilot.link.link import FlightLink
+    from layerpilot.mission.build import geofence_for
+
+    return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission))
+
+
 def _json_default(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
@@ -152,109 +107,120 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def run_mission(cfg: MissionConfig, run_dir: str | Path, progress_stream: TextIO | None = None) -> MissionResult:
-    """Fly ``cfg`` and write the run directory (report, metrics, plots, maps, decisions)."""
+def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
+                record_inputs: bool = False) -> MissionResult:
+    """Fly the mission's first vehicle and write the run directory (report, metrics, plots, maps, decisions)."""
+    from layerpilot.bus import layerset as wire
     from layerpilot.decide import area_geometry, zone_mask
-    from layerpilot.depth.simulated import to_frame
-    from layerpilot.depth.source import GroundTruthDepth, StereoDepth
+    from layerpilot.depth.source import GroundTruthDepth
     from layerpilot.layers import LayerContext, compute_layers
-    from layerpilot.link.config import LinkConfig
-    from layerpilot.link.link import FlightLink
+    from layerpilot.link.link import WaypointRefused
     from layerpilot.map import VoxelMap
-    from layerpilot.sim import CameraConfig, WorldConfig
-    from layerpilot.sim.simulator import SimConfig, Simulator
+    from layerpilot.mission.build import build_depth_service, build_pilot
+    from layerpilot.mission.map_service import MapService
+    from layerpilot.sim.simulator import Simulator
 
     wall0 = time.monotonic()
     out = Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)
-    camera = CameraConfig(width=cfg.camera_width, height=cfg.camera_height, pitch_deg=cfg.camera_pitch_deg)
-    pilot = _Pilot(cfg, camera)
-    home = (0.0, 0.0)
-    geometry = area_geometry(pilot.area, home, resolution=cfg.map_resolution)
-    aoi = zone_mask(pilot.area, geometry, home) > 0.5
+    ev, vehicle = mission.evaluation, mission.vehicles[0]
+    pilot = build_pilot(mission)
+    service = MapService(replace(mission.map_server, snapshot=""))  # the run directory gets the map
+    depth = build_depth_service(mission)
+    truth, gt = GroundTruthDepth(), VoxelMap(mission.map_server.resolution)  # the reference the map is scored on
+    home = mission.decide.home
+    geometry = area_geometry(pilot.behavior.area, home, resolution=mission.map_server.resolution)
+    aoi = zone_mask(pilot.behavior.area, geometry, home) > 0.5
     xmin, xmax, ymin, ymax = geometry.extent
     box_min, box_max = np.array([xmin, ymin, -1000.0]), np.array([xmax, ymax, 1000.0])
-    est, gt = VoxelMap(cfg.map_resolution), VoxelMap(cfg.map_resolution)
-    estimator = StereoDepth() if cfg.depth == "stereo" else GroundTruthDepth()
-    truth = GroundTruthDepth()
     sampler = SeriesSampler(METRICS, SAMPLE_INTERVAL)
-    sim_cfg = SimConfig(world=WorldConfig(seed=cfg.world_seed, size=cfg.world_size), camera=camera,
-                        frame_rate_hz=cfg.frame_rate_hz, step_s=cfg.step_s, urls=("tcp:127.0.0.1:0",))
-    frames = clouds = 0
+    sim_cfg = replace(mission.sim, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
+    frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
+    frames = 0
     path: list[tuple[float, float]] = []
     records: list[dict] = []
+    inputs: list[PilotInput] = []
     with Simulator(sim_cfg) as sim:
         host, port = sim.endpoint.addresses[0]
-        # Heartbeats come at 1 Hz of mission time; a slow lock-step frame must not look like a lost link.
-        link = FlightLink(LinkConfig(url=f"tcp:{host}:{port}", heartbeat_timeout_s=600.0))
+        link = flight_link(mission, f"tcp:{host}:{port}")
         try:
-            _take_off(sim, link, pilot.altitude, pilot.cruise_speed)
-            hover = np.array([0.0, 0.0, pilot.altitude])
+            altitude = pilot.behavior.altitude
+            _take_off(sim, link, altitude, pilot.cruise_speed or None)
+            hover = np.array([home[0], home[1], altitude])
             link.set_waypoint(*hover, yaw=0.0)
-            sim.endpoint.step(cfg.step_s)
+            sim.endpoint.step(ev.step_s)
             v = sim.vehicle
             v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover, 0.0, 0.0, 0.0, 0.0
             steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
-            progress = Progress(cfg.duration, f"{cfg.behavior} mission", "s", progress_stream)
-            target: np.ndarray | None = None
-            next_frame, t = 0.0, 0.0
-
-            def layer_set(now: float, position: np.ndarray):
-                ctx = LayerContext(now=now, home=home, position=tuple(position), options=pilot.behavior.layers)
-                return compute_layers(est.column_layers_for(geometry), ctx, pilot.behavior.layer_names, est)
+            progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", progress_stream)
+            next_frame = next_layers = t = 0.0
+            columns = message = None
 
             def metrics(now: float) -> dict[str, float]:
-                area = area_metrics(est.column_layers_for(geometry), aoi, now)
-                return {**area.as_dict(), **map_voxel_metrics(est, gt, box_min, box_max).as_dict()}
+                area = area_metrics(service.map.column_layers_for(geometry), aoi, now)
+                return {**area.as_dict(), **map_voxel_metrics(service.map, gt, box_min, box_max).as_dict()}
 
             while True:
+                if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec
+                    next_layers += layer_period
+                    cl = service.columns()
+                    message = wire.encode_layer_set(wire.GridLayersMessage(
+                        service.last_stamp, vehicle, cl.geometry, wire.column_arrays(cl, mission.map_server.layers)))
+                    columns = wire.to_column_layers(wire.decode_layer_set(message))
                 position = sim.endpoint.pose().position.copy()
-                if target is None or np.linalg.norm(position - target) <= cfg.arrival_radius:
-                    target, yaw, record = pilot.next(lambda: layer_set(t, position), position, t)
-                    link.set_waypoint(*target, yaw=yaw)
+                evaluations = pilot.evaluations
+                command = pilot.step(position, t, columns)
+                if record_inputs and pilot.evaluations != evaluations:
+                    inputs.append(PilotInput(t, tuple(float(c) for c in position), message, command))
+                if command is not None:
+                    record = command.record()
+                    try:
+                        link.set_waypoint(*command.position, yaw=command.yaw)
+                    except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
+                        record["refused"] = str(exc)
+                        if link.refused[exc.kind] == 1:
+                            logging.getLogger("layerpilot.eval").warning("waypoint refused by the link: %s", exc)
                     records.append(record)
                 if t >= next_frame - 1e-9:
-                    next_frame += 1.0 / cfg.frame_rate_hz
+                    next_frame += frame_period
                     pose = sim.endpoint.pose()
-                    frame = to_frame(sim.renderer.render_vehicle(pose.position, pose.yaw), t)
+                    frame = sim.renderer.render_vehicle(pose.position, pose.yaw, t)
                     frames += 1
                     path.append((float(pose.position[0]), float(pose.position[1])))
-                    for source, voxels in ((estimator, est), (truth, gt)):
-                        cloud = source.push(frame)
-                        if cloud is not None and len(cloud):
-                            voxels.insert(cloud.points, cloud.origin, cloud.colors, stamp=t)
-                            clouds += voxels is est
+                    if (cloud := depth.push(frame)) is not None:
+                        service.insert(cloud.points, cloud.origin, cloud.colors, t, mission.depth.max_depth)
+                    if (reference := truth.push(frame)) is not None and len(reference):
+                        gt.insert(reference.points, reference.origin, reference.colors, stamp=t)
                 sampler.maybe_sample(t, lambda: metrics(t))
                 last = sampler.series.last() if len(sampler.series) else {}
                 progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(records)}")
-                if t >= cfg.duration - 1e-9:
+                if t >= ev.duration - 1e-9:
                     break
-                sim.endpoint.step(cfg.step_s)
+                sim.endpoint.step(ev.step_s)
                 steps += 1
-                t = steps * cfg.step_s
+                t = steps * ev.step_s
             if sampler.series.last()["t"] < t:
                 sampler.series.append(t, metrics(t))
             progress.close(f"mapped {sampler.series.last()['percent_mapped']:.1f}% waypoints {len(records)}")
         finally:
             link.close()
 
+    est = service.map
     est.save(out / "map.ot")
     est.export_bt(out / "map.bt")
     with open(out / "decisions.jsonl", "w") as f:
         for record in records:
             f.write(json.dumps(record, default=_json_default) + "\n")
-    final_layers = compute_layers(
-        est.column_layers_for(geometry),
-        LayerContext(now=t, home=home, options=pilot.behavior.layers),
-        pilot.behavior.layer_names,
-        est,
-    )
+    final_layers = compute_layers(est.column_layers_for(geometry), LayerContext(now=t, home=home,
+                                  options=pilot.behavior.layers), pilot.behavior.layer_names, est)
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
-    settings = {**asdict(cfg), "waypoints": len(records), "frames": frames, "clouds": clouds,
-                **{f"depth_{k}": v for k, v in estimator.stats().items()},  # why frames gave no cloud
+    settings = {"mission": to_tables(mission), "waypoints": len(records), "reached": pilot.reached,
+                "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
+                "frames": frames, "clouds": depth.clouds,
+                **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud
                 "wall_s": round(time.monotonic() - wall0, 1)}
-    paths = write_run_report(out, f"layerpilot mission: {cfg.behavior}", sampler.series,
+    paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", sampler.series,
                              est.column_layers_for(geometry), aoi, np.array(path).reshape(-1, 2), images, settings)
-    return MissionResult(out, sampler.series.last(), len(records), frames, clouds,
-                         time.monotonic() - wall0, paths)
+    return MissionResult(out, sampler.series.last(), len(records), frames, depth.clouds,
+                         time.monotonic() - wall0, paths, inputs)

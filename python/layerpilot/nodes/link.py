@@ -13,9 +13,7 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass, field
 
-import numpy as np
 import zenoh
 
 from layerpilot.bus import keys
@@ -23,44 +21,37 @@ from layerpilot.bus.guard import guarded
 from layerpilot.bus.messages import State, Waypoint, decode_waypoint, encode_state
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
-from layerpilot.config import check_range
-from layerpilot.link.config import LinkConfig
-from layerpilot.link.link import FlightLink, LinkError
+from layerpilot.geometry import Pose
+from layerpilot.link.geofence import Geofence
+from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
+from layerpilot.mission.config import LinkSettings
 from layerpilot.nodes.runner import wait_for_stop
+from layerpilot.nodes.supervise import Supervisor
 
 _log = logging.getLogger("layerpilot.link")
 
 
-@dataclass(frozen=True)
-class LinkNodeConfig:
-    """The ``[link]`` table of a mission file: the flight link's settings plus the node's own."""
-
-    link: LinkConfig = field(default_factory=LinkConfig)
-    takeoff_altitude: float = 30.0  # m above home
-    pose_rate: float = 10.0  # Hz
-
-    def __post_init__(self) -> None:
-        check_range("link.takeoff_altitude", self.takeoff_altitude, 1.0, 500.0)
-        check_range("link.pose_rate", self.pose_rate, 0.1, 100.0)
-
-
-def quat_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    cr, sr, cp, sp = math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
-
-
 class LinkNode:
-    def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkNodeConfig) -> None:
+    """``geofence``: the mission's (``mission.build.geofence_for``); the link refuses every waypoint
+    outside it, and each refusal is logged once per kind and counted in ``rejects``.
+
+    ``connected`` is set once the autopilot's HEARTBEAT was heard (the node says ``ready`` then,
+    ``connecting`` before); ``phase`` is ``connecting``, ``taking off`` or ``flying``; a link that
+    cannot connect or take off fails the node (``supervisor.failure`` says why)."""
+
+    def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence) -> None:
         self.session, self.keys, self.cfg = session, keys.Keys(vehicle), cfg
         self.rejects = Rejects(_log)
+        self.supervisor = Supervisor(_log)
+        self.connected = threading.Event()
+        self.phase = "connecting"
         self._t0 = time.monotonic()
-        self.link = FlightLink(cfg.link, clock=self.clock)
+        self.link = FlightLink(cfg.link, clock=self.clock, geofence=geofence)
         self._stop = threading.Event()
         self._sub = None
         self.waypoints = 0
         self._last_seq = -1
+        self._speed = 0.0  # m/s last asked of the autopilot; 0 = its default
         self._thread = threading.Thread(target=self._publish_loop, name="link-pose", daemon=True)
 
     def clock(self) -> float:
@@ -72,15 +63,19 @@ class LinkNode:
         link = self.link
         try:
             link.connect()
+            self.connected.set()
+            self.phase = "taking off"
             self._thread.start()  # pose from now on, so the ground sees the takeoff
             link.wait_ready()
             link.start_guided()
             link.arm()
             link.takeoff(self.cfg.takeoff_altitude)
-        except LinkError:
-            if stop.is_set():  # the waits end with an error when the link is closed
-                return
-            raise
+        except LinkError as exc:
+            if not stop.is_set():  # the waits end with an error when the link is closed
+                self.supervisor.fail(f"{self.phase}: {exc}")  # the node exits 1, `up` restarts it
+                self.phase = "failed"
+            return
+        self.phase = "flying"
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
                                                     guarded(decode_waypoint, self._on_waypoint, self.rejects))
         wait_for_stop(stop)
@@ -90,9 +85,15 @@ class LinkNode:
             return
         self._last_seq = w.seq
         try:
+            self.link.check_waypoint(*w.position)  # the geofence first: nothing of a refused waypoint is sent
+            if w.speed != self._speed:  # a survey pattern flies at the speed its camera rate allows
+                self.link.set_speed(w.speed if w.speed > 0 else None)
+                self._speed = w.speed
             self.link.set_waypoint(*w.position, yaw=None if math.isnan(w.yaw) else w.yaw, face_waypoint=True)
             self.waypoints += 1
-        except (LinkError, ValueError) as exc:  # outside the allowed area, or the pilot has the vehicle
+        except WaypointRefused as exc:  # outside the geofence (area, altitude) or not finite
+            self.rejects.reject(key, BadMessage(f"waypoint refused ({exc.kind})", str(exc)))
+        except (LinkError, ValueError) as exc:  # the pilot has the vehicle, the link is lost
             self.rejects.reject(key, BadMessage("waypoint refused", str(exc)))
 
     def _publish_loop(self) -> None:
@@ -103,7 +104,7 @@ class LinkNode:
                 continue
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
-                t.boot_time, self.keys.vehicle, t.position, quat_from_euler(t.roll, t.pitch, t.yaw), t.velocity,
+                t.boot_time, self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
                 t.armed, t.mode, battery)))
 
     def stop(self) -> None:
