@@ -10,25 +10,29 @@ import zenoh
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
-from layerpilot.bus.layerset import LayerSet, decode_layer_set, encode_layer_set, to_column_layers
+from layerpilot.bus.layerset import GridLayersMessage, decode_layer_set, encode_layer_set, to_column_layers
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
 from layerpilot.grid import GridGeometry
-from layerpilot.nodes.map_server import MapServer, MapServerConfig
+from layerpilot.mission.config import Mission
+from layerpilot.mission.depth_service import DepthServiceConfig
+from layerpilot.mission.map_service import MapServiceConfig
+from layerpilot.nodes.map_server import MapServer
 
 rng = np.random.default_rng(11)
-Q = np.array([1.0, 0, 0, 0])
 GOOD = {
-    msg.decode_cloud: msg.encode_cloud(msg.Cloud(1.0, "uav1", 1, rng.normal(size=(50, 3)).astype(np.float32),
-                                                 np.zeros(3), rng.integers(0, 256, (50, 3), dtype=np.uint8))),
-    msg.decode_frame: msg.encode_frame(msg.Frame(1.0, "uav1", 1, rng.integers(0, 256, (8, 10, 3), dtype=np.uint8),
-                                                 (10, 10, 5, 4), np.zeros(3), Q, np.ones((8, 10), np.float32))),
-    msg.decode_state: msg.encode_state(msg.State(1.0, "uav1", np.zeros(3), Q)),
+    msg.decode_cloud: msg.encode_cloud(msg.CloudMessage("uav1", 1, PointCloud(
+        rng.normal(size=(50, 3)).astype(np.float32), np.zeros(3), 1.0, rng.integers(0, 256, (50, 3), dtype=np.uint8)))),
+    msg.decode_frame: msg.encode_frame(msg.FrameMessage("uav1", 1, CameraFrame(
+        rng.integers(0, 256, (8, 10, 3), dtype=np.uint8), Pose(), CameraIntrinsics(10, 10, 5, 4, 10, 8), 1.0,
+        np.ones((8, 10), np.float32)))),
+    msg.decode_state: msg.encode_state(msg.State(1.0, "uav1", Pose())),
     msg.decode_waypoint: msg.encode_waypoint(msg.Waypoint(1.0, "uav1", 1, np.ones(3))),
     msg.decode_decision: msg.encode_decision(msg.Decision(1.0, "uav1", 1, np.ones(3), 0.5, (msg.Term("a", 1, 1, 1),))),
     msg.decode_mission_state: msg.encode_mission_state(msg.MissionState(1.0, "uav1", "survey")),
-    decode_layer_set: encode_layer_set(LayerSet(1.0, "uav1", GridGeometry(0, 0, 1, 16, 8), {
+    decode_layer_set: encode_layer_set(GridLayersMessage(1.0, "uav1", GridGeometry(0, 0, 1, 16, 8), {
         "observed": rng.random((8, 16)) > 0.5, "elevation": rng.random((8, 16)).astype(np.float32),
         "last_seen": rng.random((8, 16)), "color": rng.integers(0, 256, (8, 16, 3), dtype=np.uint8)})),
 }
@@ -97,7 +101,7 @@ def test_map_server_survives_thousands_of_bad_clouds():
     ep = free_endpoint()
     server_session = open_session(BusConfig(endpoint=ep))
     client = open_session(BusConfig(endpoint=ep))
-    server = MapServer(server_session, MapServerConfig(resolution=0.5, snapshot="", queue_size=10_000))
+    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=0.5, snapshot="", queue_size=10_000)))
     server.start()
     try:
         time.sleep(0.5)
@@ -116,7 +120,7 @@ def test_map_server_survives_thousands_of_bad_clouds():
         while server.rejects.total < expected_rejects and time.monotonic() < end:
             time.sleep(0.05)
         assert server.rejects.total == expected_rejects
-        assert server.counters.clouds_received == len(bad) + 1 - expected_rejects
+        assert server.queue.received == len(bad) + 1 - expected_rejects
         kinds = server.rejects.by_kind()
         assert {"not protobuf", "bad size"} <= set(kinds), kinds
         reply = list(client.get(Keys("uav1").service("stats"), timeout=10))[0]
@@ -128,13 +132,13 @@ def test_map_server_survives_thousands_of_bad_clouds():
 
 
 def test_decide_and_depth_nodes_survive_thousands_of_bad_messages():
-    from layerpilot.nodes.decide import DecideConfig, DecideNode
-    from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
+    from layerpilot.nodes.decide import DecideNode
+    from layerpilot.nodes.depth import DepthNode
 
     ep = free_endpoint()
     node_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
-    decide = DecideNode(node_session, "uav1", DecideConfig())
-    depth = DepthNode(node_session, "uav1", DepthNodeConfig(source="ground_truth"))
+    decide = DecideNode(node_session, "uav1", Mission())
+    depth = DepthNode(node_session, "uav1", Mission(depth=DepthServiceConfig(source="ground_truth")))
     decide.start()
     depth.start()
     try:

@@ -6,10 +6,13 @@ import json
 
 import numpy as np
 
-from layerpilot.eval.mission import MissionConfig, run_mission
+from layerpilot.eval.mission import run_mission
 from layerpilot.eval.series import MetricSeries
+from layerpilot.mission.config import Override, load_mission
 
-SHORT = MissionConfig(duration=20.0, camera_width=160, camera_height=120, frame_rate_hz=1.0, step_s=0.1)
+SHORT = load_mission("default", [Override("--duration", "evaluation.duration", 20.0),
+                                 Override("--step", "evaluation.step_s", 0.1),
+                                 Override("--camera", "sim.camera", {"width": 160, "height": 120})])
 
 
 def test_short_mission_is_deterministic_and_writes_the_run(tmp_path) -> None:
@@ -29,3 +32,44 @@ def test_short_mission_is_deterministic_and_writes_the_run(tmp_path) -> None:
         assert (tmp_path / "a" / name).stat().st_size > 0, name
     first = json.loads((tmp_path / "a" / "decisions.jsonl").read_text().splitlines()[0])
     assert first["time"] == 0.0 and len(first["waypoint"]) == 3 and "explanation" in first
+
+
+def _records(run_dir) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "decisions.jsonl").read_text().splitlines()]
+
+
+def _behavior(tmp_path, name: str, text: str) -> str:
+    path = tmp_path / f"{name}.toml"
+    path.write_text('weights = { fringe = 1.0, time = 0.5 }\n' + text)
+    return str(path)
+
+
+def test_the_evaluator_retargets_while_flying_when_the_behavior_opts_in(tmp_path) -> None:
+    runs = {}
+    for enabled in (False, True):
+        behavior = _behavior(tmp_path, f"rt-{enabled}", f"[retarget]\nenabled = {str(enabled).lower()}\n"
+                                                          "min_interval = 1.0\nmargin = 0.1\n")
+        mission = load_mission("default", [Override("--behavior", "decide.behavior", behavior),
+                                           Override("--duration", "evaluation.duration", 40.0),
+                                           Override("--step", "evaluation.step_s", 0.1),
+                                           Override("--camera", "sim.camera", {"width": 160, "height": 120})])
+        run_mission(mission, tmp_path / f"run-{enabled}")
+        runs[enabled] = _records(tmp_path / f"run-{enabled}")
+    assert not any(r["reason"] == "retarget" for r in runs[False])
+    switches = [r for r in runs[True] if r["reason"] == "retarget"]
+    assert switches and all(r["retargeted"] for r in switches)
+    assert [r["waypoint"] for r in runs[True]] != [r["waypoint"] for r in runs[False]]
+
+
+def test_the_evaluator_follows_the_weight_schedule(tmp_path) -> None:
+    behavior = _behavior(tmp_path, "phases", "[[schedule]]\nafter_time = 15.0\nweights = { distance = 1.0 }\n")
+    mission = load_mission("default", [Override("--behavior", "decide.behavior", behavior),
+                                       Override("--duration", "evaluation.duration", 40.0),
+                                       Override("--step", "evaluation.step_s", 0.1),
+                                       Override("--camera", "sim.camera", {"width": 160, "height": 120})])
+    run_mission(mission, tmp_path / "run")
+    records = _records(tmp_path / "run")
+    early = [r["weights"] for r in records if r["time"] < 15.0]
+    late = [r["weights"] for r in records if r["time"] >= 15.0]
+    assert early and late
+    assert all(w == {"fringe": 1.0, "time": 0.5} for w in early) and all(w == {"distance": 1.0} for w in late)

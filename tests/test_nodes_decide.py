@@ -9,10 +9,13 @@ import pytest
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
-from layerpilot.bus.layerset import LayerSet, column_arrays, encode_layer_set
+from layerpilot.bus.layerset import GridLayersMessage, column_arrays, encode_layer_set
+from layerpilot.geometry import Pose
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
-from layerpilot.nodes.decide import DecideConfig, DecideNode
+from layerpilot.mission.config import Mission
+from layerpilot.mission.pilot import PilotConfig
+from layerpilot.nodes.decide import DecideNode
 from conftest import wait_for
 
 
@@ -23,7 +26,7 @@ def layer_payload(vehicle: str) -> bytes:
     pts = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1).astype(np.float32)
     m.insert(pts, np.array([0.0, 0.0, 30.0]), stamp=1.0)
     cl = m.column_layers(-128, -128, 256, 256)
-    return encode_layer_set(LayerSet(1.0, vehicle, cl.geometry, column_arrays(cl)))
+    return encode_layer_set(GridLayersMessage(1.0, vehicle, cl.geometry, column_arrays(cl)))
 
 
 @pytest.fixture
@@ -37,7 +40,7 @@ def sessions():
 
 def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
     node_session, world = sessions
-    nodes = [DecideNode(node_session, v, DecideConfig()) for v in ("uav1", "uav2")]
+    nodes = [DecideNode(node_session, v, Mission(vehicles=["uav1", "uav2"])) for v in ("uav1", "uav2")]
     got: dict[str, list[msg.Waypoint]] = {"uav1": [], "uav2": []}
     decisions: list[msg.Decision] = []
     subs = [world.declare_subscriber(Keys(v).waypoint, lambda s, v=v: got[v].append(msg.decode_waypoint(s.payload.to_bytes())))
@@ -50,7 +53,7 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         time.sleep(0.5)
         k1, k2 = Keys("uav1"), Keys("uav2")
         world.put(k1.layers, layer_payload("uav1"))
-        world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", np.array([0.0, 0.0, 50.0]))))
+        world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
         wait_for(lambda: len(got["uav1"]) >= 1, "uav1's first waypoint")
         w1 = got["uav1"][0]
         assert w1.seq == 1 and w1.position[2] == 50.0
@@ -63,15 +66,15 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         # same map, same place, same behavior: uav2 would pick uav1's cell, but must stay r_e away
         wait_for(lambda: "uav1" in nodes[1]._others, "uav2 hearing uav1's target")
         world.put(k2.layers, layer_payload("uav2"))
-        world.put(k2.pose, msg.encode_state(msg.State(2.0, "uav2", np.array([0.0, 0.0, 50.0]))))
+        world.put(k2.pose, msg.encode_state(msg.State(2.0, "uav2", Pose(np.array([0.0, 0.0, 50.0])))))
         wait_for(lambda: len(got["uav2"]) >= 1, "uav2's first waypoint")
         assert np.hypot(*(got["uav2"][0].position[:2] - w1.position[:2])) >= 10.0
 
         # no new decision while flying; a new one on arrival
-        world.put(k1.pose, msg.encode_state(msg.State(3.0, "uav1", w1.position * [0.5, 0.5, 1])))
+        world.put(k1.pose, msg.encode_state(msg.State(3.0, "uav1", Pose(w1.position * [0.5, 0.5, 1]))))
         time.sleep(1.5)
         assert {w.seq for w in got["uav1"]} == {1} and len(got["uav1"]) >= 2  # the same waypoint, repeated
-        world.put(k1.pose, msg.encode_state(msg.State(9.0, "uav1", w1.position + [1.0, 0, 0])))
+        world.put(k1.pose, msg.encode_state(msg.State(9.0, "uav1", Pose(w1.position + [1.0, 0, 0]))))
         wait_for(lambda: got["uav1"][-1].seq == 2, "uav1's second waypoint")
         assert nodes[0].reached == 1
         flown = np.hypot(*(0.5 * w1.position[:2])) + np.hypot(*(0.5 * w1.position[:2] + [1.0, 0]))
@@ -85,3 +88,71 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
             n.stop()
         for s in subs:
             s.undeclare()
+
+
+def wide_payload(vehicle: str, half: float, stamp: float) -> bytes:
+    m = VoxelMap(1.0)
+    xs, ys = np.meshgrid(np.arange(-half, half) + 0.5, np.arange(-half, half) + 0.5)
+    pts = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1).astype(np.float32)
+    m.insert(pts, np.array([0.0, 0.0, 30.0]), stamp=stamp)
+    cl = m.column_layers(-128, -128, 256, 256)
+    return encode_layer_set(GridLayersMessage(stamp, vehicle, cl.geometry, column_arrays(cl)))
+
+
+def behavior_file(tmp_path, text: str) -> str:
+    path = tmp_path / "behavior.toml"
+    path.write_text('weights = { fringe = 1.0 }\nnoise = 0.0\n' + text)
+    return str(path)
+
+
+@pytest.mark.parametrize("retarget", [True, False])
+def test_live_node_retargets_while_flying_when_the_behavior_opts_in(sessions, tmp_path, retarget):
+    node_session, world = sessions
+    behavior = behavior_file(tmp_path, f"[retarget]\nenabled = {str(retarget).lower()}\nmin_interval = 0.0\n")
+    node = DecideNode(node_session, "uav1", Mission(decide=PilotConfig(behavior=behavior)))
+    got: list[msg.Waypoint] = []
+    sub = world.declare_subscriber(Keys("uav1").waypoint, lambda s: got.append(msg.decode_waypoint(s.payload.to_bytes())))
+    node.start()
+    try:
+        k = Keys("uav1")
+        time.sleep(0.5)
+        world.put(k.layers, wide_payload("uav1", 20, 1.0))
+        world.put(k.pose, msg.encode_state(msg.State(1.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
+        wait_for(lambda: len(got) >= 1, "the first waypoint")
+        first = got[0].position
+        world.put(k.pose, msg.encode_state(msg.State(19.0, "uav1", Pose(first * [0.5, 0.5, 1.0]))))  # halfway
+        time.sleep(0.3)
+        world.put(k.layers, wide_payload("uav1", 60, 20.0))  # the map has grown past the target
+        if retarget:
+            wait_for(lambda: got[-1].seq == 2, "a new target while flying")
+            assert np.hypot(*got[-1].position[:2]) > 55.0 and node.reached == 0
+        else:
+            time.sleep(1.5)
+            assert {w.seq for w in got} == {1}
+    finally:
+        node.stop()
+        sub.undeclare()
+
+
+def test_live_node_follows_the_weight_schedule(sessions, tmp_path):
+    node_session, world = sessions
+    behavior = behavior_file(tmp_path, "[[schedule]]\nafter_coverage = 0.5\nweights = { time = 1.0 }\n")
+    node = DecideNode(node_session, "uav1", Mission(decide=PilotConfig(behavior=behavior)))
+    decisions: list[msg.Decision] = []
+    sub = world.declare_subscriber(Keys("uav1").decision, lambda s: decisions.append(msg.decode_decision(s.payload.to_bytes())))
+    node.start()
+    try:
+        k = Keys("uav1")
+        time.sleep(0.5)
+        world.put(k.layers, wide_payload("uav1", 20, 1.0))
+        world.put(k.pose, msg.encode_state(msg.State(1.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
+        wait_for(lambda: len(decisions) >= 1, "the first decision")
+        world.put(k.layers, wide_payload("uav1", 100, 40.0))  # the whole area of interest seen
+        time.sleep(0.3)
+        world.put(k.pose, msg.encode_state(msg.State(50.0, "uav1", Pose(decisions[0].waypoint))))  # arrived
+        wait_for(lambda: len(decisions) >= 2, "the second decision")
+        weighted = [{t.name for t in d.terms if t.weight > 0} - {"zone", "preference", "history"} for d in decisions]
+        assert weighted[:2] == [{"fringe"}, {"time"}]
+    finally:
+        node.stop()
+        sub.undeclare()

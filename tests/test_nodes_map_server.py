@@ -16,18 +16,21 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.geometry import PointCloud
 from layerpilot.map import VoxelMap
-from layerpilot.nodes.map_server import MapServer, MapServerConfig
+from layerpilot.mission.config import Mission
+from layerpilot.mission.map_service import MapServiceConfig
+from layerpilot.nodes.map_server import MapServer
 from conftest import cli_process, wait_for
 
 K = Keys("uav1")
 
 
-def ground_cloud(stamp: float, z: float = 0.0, n: int = 40) -> msg.Cloud:
+def ground_cloud(stamp: float, z: float = 0.0, n: int = 40) -> msg.CloudMessage:
     """A flat square of ground 20 m x 20 m at height z, seen from 10 m above its centre."""
     xs, ys = np.meshgrid(np.linspace(-9.9, 9.9, n), np.linspace(-9.9, 9.9, n))
     pts = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, z)], 1).astype(np.float32)
-    return msg.Cloud(stamp, "uav1", int(stamp), pts, np.array([0.0, 0.0, z + 10.0]))
+    return msg.CloudMessage("uav1", int(stamp), PointCloud(pts, np.array([0.0, 0.0, z + 10.0]), stamp))
 
 
 def get_one(session, selector: str):
@@ -51,8 +54,8 @@ def bus():
 
 def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
     server_session, client = bus
-    cfg = MapServerConfig(resolution=0.5, layers_rate=5.0, window=(-10.0, -10.0, 40, 40),
-                          snapshot=str(tmp_path / "map.ot"), snapshot_period=0.5)
+    cfg = Mission(map_server=MapServiceConfig(resolution=0.5, layers_rate=5.0, window=(-10.0, -10.0, 40, 40),
+                          snapshot=str(tmp_path / "map.ot"), snapshot_period=0.5))
     server = MapServer(server_session, cfg)
     server.start()
     published = []
@@ -63,8 +66,8 @@ def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
         wait_for(lambda: clouds.matching_status.matching, "the map server's cloud subscription")
         for i in range(5):
             clouds.put(msg.encode_cloud(ground_cloud(float(i + 1))))
-        wait_for(lambda: server.counters.clouds_inserted == 5, "5 inserts")
-        assert server.counters.points_inserted == 5 * 1600
+        wait_for(lambda: server.service.clouds_inserted == 5, "5 inserts")
+        assert server.service.points_inserted == 5 * 1600
 
         ls = decode_layer_set(get_one(client, K.service("layers") + "?x=-10;y=-10;w=40;h=40"))
         cl = to_column_layers(ls)
@@ -89,7 +92,7 @@ def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
 
         wait_for(lambda: len(published) >= 2, "published layer sets")
         assert decode_layer_set(published[-1]).geometry.shape == (40, 40)
-        wait_for(lambda: server.counters.snapshots_written >= 1, "a periodic snapshot")
+        wait_for(lambda: server.snapshots_written >= 1, "a periodic snapshot")
         save = pb.SaveReply.FromString(get_one(client, K.service("save")))
         assert Path(save.path) == (tmp_path / "map.ot").resolve() and save.bytes > 0
     finally:
@@ -103,16 +106,16 @@ def test_insert_query_publish_and_snapshot_reload(bus, tmp_path):
 
 def test_full_queue_drops_oldest_and_stays_bounded(bus):
     server_session, client = bus
-    server = MapServer(server_session, MapServerConfig(resolution=0.5, queue_size=3, snapshot=""))
+    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=0.5, queue_size=3, snapshot="")))
     # no worker yet: every cloud waits in the queue, so the drops are deterministic
     for i in range(10):
         server._enqueue(ground_cloud(float(i)), K.cloud)
-    assert len(server.queue) == 3 and server.counters.clouds_dropped == 7 and server.counters.clouds_received == 10
-    assert [server.queue.get().stamp for _ in range(3)] == [7.0, 8.0, 9.0]  # the newest survive, oldest first
+    assert len(server.queue) == 3 and server.queue.dropped == 7 and server.queue.received == 10
+    assert [server.queue.get().cloud.stamp for _ in range(3)] == [7.0, 8.0, 9.0]  # the newest survive, oldest first
     server._enqueue(ground_cloud(10.0), K.cloud)
     server.start()
-    wait_for(lambda: server.counters.clouds_inserted == 1, "the insert")
-    assert server.counters.last_stamp == 10.0 and len(server.queue) == 0
+    wait_for(lambda: server.service.clouds_inserted == 1, "the insert")
+    assert server.service.last_stamp == 10.0 and len(server.queue) == 0
     server.stop()
 
 

@@ -21,6 +21,26 @@ class ConfigError(ValueError):
     """A configuration value or key is wrong; the message names it."""
 
 
+class RangeError(ConfigError):
+    """A value outside its bounds; keeps them so that a command-line flag can be named instead of the key."""
+
+    def __init__(self, name: str, value: float, lo: float | None, hi: float | None) -> None:
+        self.name, self.value, self.lo, self.hi = name, value, lo, hi
+        super().__init__(f"{name} = {value} is out of range {self.bounds}")
+
+    @property
+    def bounds(self) -> str:
+        return f"[{'-inf' if self.lo is None else self.lo}, {'inf' if self.hi is None else self.hi}]"
+
+    def requirement(self) -> str:
+        """``must be >= 20.0`` / ``must be in [20.0, 5000.0]``: the rule, without the key's name."""
+        if self.hi is None:
+            return f"must be >= {self.lo}"
+        if self.lo is None:
+            return f"must be <= {self.hi}"
+        return f"must be in {self.bounds}"
+
+
 def shipped_config(kind: str) -> Path:
     """``config/<kind>`` (behaviors, missions): the checkout's, else the copy a wheel installs beside ``_core``."""
     checkout = Path(__file__).resolve().parents[2] / "config" / kind
@@ -127,6 +147,5 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
 
 def check_range(name: str, value: float, lo: float | None = None, hi: float | None = None) -> None:
     """Raise ConfigError naming ``name`` unless lo <= value <= hi."""
-    if (lo is not None and value < lo) or (hi is not None and value > hi):
-        bounds = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-        raise ConfigError(f"{name} = {value} is out of range {bounds}")
+    if not ((lo is None or value >= lo) and (hi is None or value <= hi)):  # NaN fails too
+        raise RangeError(name, value, lo, hi)

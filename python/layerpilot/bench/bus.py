@@ -14,12 +14,15 @@ import numpy as np
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
-from layerpilot.nodes.map_server import MapServer, MapServerConfig
+from layerpilot.geometry import PointCloud
+from layerpilot.mission.config import Mission
+from layerpilot.mission.map_service import MapServiceConfig
+from layerpilot.nodes.map_server import MapServer
 
 K = Keys("bench")
 
 
-def survey_cloud(i: int, width: int, height: int, speed: float, rate: float, rng: np.random.Generator) -> msg.Cloud:
+def survey_cloud(i: int, width: int, height: int, speed: float, rate: float, rng: np.random.Generator) -> msg.CloudMessage:
     """One depth frame's cloud: a 60-degree camera pitched 60 degrees down from 30 m over 0-8 m tall clutter."""
     origin = np.array([i * speed / rate, 0.0, 30.0])
     f = 0.5 * width / np.tan(np.radians(30))
@@ -33,14 +36,14 @@ def survey_cloud(i: int, width: int, height: int, speed: float, rate: float, rng
     ground = rng.uniform(0, 8, len(d))
     t = (origin[2] - ground) / -d[:, 2]
     pts = (origin + d * t[:, None]).astype(np.float32)
-    return msg.Cloud(i / rate, K.vehicle, i, pts, origin)
+    return msg.CloudMessage(K.vehicle, i, PointCloud(pts, origin, i / rate))
 
 
 def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int = 240, queries: int = 30,
         window: int = 512, resolution: float = 0.5) -> dict:
     ep = free_endpoint()
     server_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
-    server = MapServer(server_session, MapServerConfig(resolution=resolution, snapshot="", layers_rate=0.01))
+    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=resolution, snapshot="", layers_rate=0.01)))
     server.start()
     rng = np.random.default_rng(0)
     try:
@@ -50,10 +53,10 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         for i, c in enumerate(clouds):  # paced like a camera
             time.sleep(max(0.0, start + i / rate - time.perf_counter()))
             client.put(K.cloud, c)
-        while server.counters.clouds_inserted + server.counters.clouds_dropped < len(clouds):
+        while server.service.clouds_inserted + server.queue.dropped < len(clouds):
             time.sleep(0.005)
         elapsed = time.perf_counter() - start
-        c = server.counters
+        inserted, dropped = server.service.clouds_inserted, server.queue.dropped
 
         half = window * resolution / 2
         selector = f"{K.service('layers')}?x={-half};y={-half};w={window};h={window}"
@@ -69,9 +72,9 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         server_session.close()
     return {
         "bench": "bus", "cloud_size": f"{width}x{height}", "points_per_cloud": width * height,
-        "clouds_offered_per_s": rate, "clouds_sent": len(clouds), "clouds_inserted": c.clouds_inserted,
-        "clouds_dropped": c.clouds_dropped, "clouds_inserted_per_s": round(c.clouds_inserted / elapsed, 2),
-        "keeps_up": c.clouds_dropped == 0,
+        "clouds_offered_per_s": rate, "clouds_sent": len(clouds), "clouds_inserted": inserted,
+        "clouds_dropped": dropped, "clouds_inserted_per_s": round(inserted / elapsed, 2),
+        "keeps_up": dropped == 0,
         "layer_window": f"{window}x{window}", "layer_set_bytes": size,
         "layer_query_ms_median": round(1e3 * float(np.median(rtt)), 2),
         "layer_query_ms_p95": round(1e3 * float(np.percentile(rtt, 95)), 2),

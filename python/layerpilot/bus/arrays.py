@@ -36,8 +36,12 @@ def to_proto(arr: np.ndarray, out: pb.Array | None = None, *, compress: bool = F
 
 
 def from_proto(msg: pb.Array, name: str, *, dtype: str | tuple[str, ...] | None = None,
-               shape: tuple[int | None, ...] | None = None) -> np.ndarray:
-    """The array in ``msg`` (read-only view of its bytes where possible); BadMessage names ``name``."""
+               shape: tuple[int | None, ...] | None = None, max_items: int = MAX_ITEMS) -> np.ndarray:
+    """The array in ``msg`` (read-only view of its bytes where possible); BadMessage names ``name``.
+
+    ``max_items``: the message type's limit (``bus.limits``), checked on the declared shape
+    before a byte is inflated.
+    """
     if msg.dtype not in DTYPES:
         raise BadMessage("bad dtype", f"{name}: dtype {msg.dtype!r} not one of {', '.join(DTYPES)}")
     allowed = (dtype,) if isinstance(dtype, str) else dtype
@@ -50,8 +54,8 @@ def from_proto(msg: pb.Array, name: str, *, dtype: str | tuple[str, ...] | None 
     count = 1
     for d in dims:
         count *= d
-    if count > MAX_ITEMS:
-        raise BadMessage("bad shape", f"{name}: {count} items is more than the limit {MAX_ITEMS}")
+    if count > min(max_items, MAX_ITEMS):
+        raise BadMessage("too large", f"{name}: {count} items is more than the limit {min(max_items, MAX_ITEMS)}")
     dt = np.dtype(msg.dtype).newbyteorder("<")
     expected = count * dt.itemsize
     data = msg.data

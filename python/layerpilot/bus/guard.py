@@ -9,9 +9,14 @@ import zenoh
 from layerpilot.bus.reject import BadMessage, Rejects
 
 
-def guarded(decode: Callable[[bytes], Any], handle: Callable[[Any, str], None],
-            rejects: Rejects) -> Callable[[zenoh.Sample], None]:
-    """A Zenoh sample callback: ``handle(decode(payload), key)``; BadMessage is counted, not raised."""
+def guarded(decode: Callable[[bytes], Any], handle: Callable[[Any, str], None], rejects: Rejects,
+            supervisor: Any = None) -> Callable[[zenoh.Sample], None]:
+    """A Zenoh sample callback: ``handle(decode(payload), key)``; BadMessage is counted, not raised.
+
+    With a ``supervisor`` (``nodes.supervise.Supervisor``) every accepted input is timed
+    (``heard``) and an unexpected exception in ``handle`` is counted and logged with its
+    traceback instead of vanishing in the transport's thread.
+    """
 
     def callback(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -20,7 +25,16 @@ def guarded(decode: Callable[[bytes], Any], handle: Callable[[Any, str], None],
         except BadMessage as exc:
             rejects.reject(key, exc)
             return
-        handle(msg, key)
+        if supervisor is None:
+            handle(msg, key)
+            return
+        supervisor.heard(key)
+        try:
+            handle(msg, key)
+        except BadMessage as exc:
+            rejects.reject(key, exc)
+        except Exception as exc:
+            supervisor.error(f"callback {key}", exc)
 
     return callback
 

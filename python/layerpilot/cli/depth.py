@@ -30,15 +30,15 @@ def register(commands: argparse._SubParsersAction) -> None:
     prev.set_defaults(func=_preview)
 
 
-def _node(args, mission, tables, vehicle, session) -> Running:
-    from layerpilot.config import from_dict
-    from layerpilot.nodes.depth import DepthNode, DepthNodeConfig
+def _node(args, mission, vehicle, session) -> Running:
+    from layerpilot.nodes.depth import DepthNode
 
-    node = DepthNode(session, vehicle, from_dict(DepthNodeConfig, tables.get("depth", {}), "depth"))
+    node = DepthNode(session, vehicle, mission)
     node.start()
     q = node.queue
     return Running(lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
-                            "rejected": node.rejects.total}, node.stop, {"source": node.cfg.source})
+                            "rejected": node.rejects.total}, node.stop, {"source": node.cfg.source},
+                   supervisor=node.supervisor)
 
 
 def _preview(args: argparse.Namespace) -> None:

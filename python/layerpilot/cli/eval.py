@@ -5,35 +5,53 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
-from dataclasses import asdict
 from pathlib import Path
 
-BEHAVIORS = ["balanced", "exploration", "time", "distance", "lawnmower", "orbit"]
+# option dest -> the mission key it overrides (a flag that is not given leaves the file's value)
+EVAL_FLAGS = {"behavior": "decide.behavior", "seed": "decide.seed", "duration": "evaluation.duration",
+              "world_seed": "sim.world.seed", "world_size": "sim.world.size", "pitch": "sim.camera.pitch_deg",
+              "frame_rate": "sim.frame_rate_hz", "depth": "depth.source", "out": "evaluation.out",
+              "seeds": "evaluation.seeds", "behaviors": "evaluation.behaviors"}
+
+
+def _camera(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    return width, height
+
+
+def _names(text: str) -> list[str]:
+    return [b.strip() for b in text.split(",") if b.strip()]
 
 
 def _mission_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=float, default=600.0, help="simulated seconds (default 600)")
-    p.add_argument("--world-seed", type=int, default=0, help="procedural forest seed")
-    p.add_argument("--world-size", type=float, default=400.0, help="world square side (m)")
-    p.add_argument("--camera", default="320x240", help="camera image size WIDTHxHEIGHT (default 320x240)")
-    p.add_argument("--pitch", type=float, default=60.0, help="camera pitch below the horizon (deg)")
-    p.add_argument("--frame-rate", type=float, default=1.0, help="camera frames per simulated second")
-    p.add_argument("--depth", choices=["stereo", "truth"], default="stereo",
-                   help="mission map from two-view stereo (default) or from ground-truth depth")
-    p.add_argument("--out", type=Path, default=Path("runs"), help="parent directory of the run directory")
+    p.add_argument("--config", help="mission file or name in config/missions/ (default: default); "
+                   "the flags below override its fields")
+    p.add_argument("--duration", type=float, help="simulated seconds (mission: evaluation.duration)")
+    p.add_argument("--world-seed", type=int, help="procedural forest seed (sim.world.seed)")
+    p.add_argument("--world-size", type=float, help="world square side in m (sim.world.size)")
+    p.add_argument("--camera", type=_camera, help="camera image size WIDTHxHEIGHT (sim.camera.width, height)")
+    p.add_argument("--pitch", type=float, help="camera pitch below the horizon in deg (sim.camera.pitch_deg)")
+    p.add_argument("--frame-rate", type=float, help="camera frames per simulated second (sim.frame_rate_hz)")
+    p.add_argument("--depth", type=lambda v: "ground_truth" if v == "truth" else v,  # "truth": its old name
+                   choices=["stereo", "ground_truth"],
+                   help="mission map from two-view stereo or from the renderer's depth (depth.source)")
+    p.add_argument("--out", help="parent directory of the run directory (evaluation.out)")
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    demo = commands.add_parser("demo", help="fly one scored simulated mission and write its report")
-    demo.add_argument("--behavior", default="balanced", help=f"preset, .toml path, or baseline ({', '.join(BEHAVIORS)})")
-    demo.add_argument("--seed", type=int, default=0, help="decision seed")
+    demo = commands.add_parser("demo", help="fly one scored simulated mission (lock-step) and write its report")
+    demo.add_argument("--behavior", help="preset, .toml path, or pattern (lawnmower, orbit) (decide.behavior)")
+    demo.add_argument("--seed", type=int, help="decision seed (decide.seed)")
     demo.add_argument("--name", default=None, help="run directory name (default: demo-BEHAVIOR)")
     _mission_options(demo)
     demo.set_defaults(func=_demo)
 
-    study = commands.add_parser("study", help="compare the paper's six behaviors over several seeds")
-    study.add_argument("--behaviors", default=",".join(BEHAVIORS), help="comma-separated list")
-    study.add_argument("--seeds", type=int, default=3, help="decision seeds per MCDM behavior (default 3)")
+    study = commands.add_parser("study", help="compare behaviors over several seeds (the paper's six by default)")
+    study.add_argument("--behaviors", type=_names, help="comma-separated list (evaluation.behaviors)")
+    study.add_argument("--seeds", type=int, help="decision seeds per MCDM behavior (evaluation.seeds)")
     study.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="missions in parallel")
     study.add_argument("--name", default="study", help="run directory name")
     study.add_argument("--quick", action="store_true", help="short version for CI: 60 s, 1 seed, 160x120 camera")
@@ -41,16 +59,14 @@ def register(commands: argparse._SubParsersAction) -> None:
     study.set_defaults(func=_study)
 
 
-def _config(args: argparse.Namespace, behavior: str, seed: int):
-    from layerpilot.eval.mission import MissionConfig
+def _mission(args: argparse.Namespace):
+    """The mission file with the given flags applied; errors name the flag."""
+    from layerpilot.cli.nodes import mission_from_args
+    from layerpilot.mission.config import Override
 
-    try:
-        width, height = (int(v) for v in args.camera.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--camera: expected WIDTHxHEIGHT, got {args.camera!r}") from None
-    return MissionConfig(behavior=behavior, duration=args.duration, seed=seed, world_seed=args.world_seed,
-                         world_size=args.world_size, camera_width=width, camera_height=height,
-                         camera_pitch_deg=args.pitch, frame_rate_hz=args.frame_rate, depth=args.depth)
+    camera = [] if args.camera is None else [Override("--camera", "sim.camera.width", args.camera[0]),
+                                             Override("--camera", "sim.camera.height", args.camera[1])]
+    return mission_from_args(args, EVAL_FLAGS, camera)
 
 
 def _table(rows: dict[str, dict[str, float]]) -> str:
@@ -68,20 +84,21 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
 def _demo(args: argparse.Namespace) -> None:
     from layerpilot.eval.mission import run_mission
 
-    cfg = _config(args, args.behavior, args.seed)
-    result = run_mission(cfg, args.out / (args.name or f"demo-{Path(args.behavior).stem}"))
-    print(_table({cfg.behavior: result.final}))
-    print(f"{cfg.duration:.0f} simulated s in {result.wall_s:.1f} s wall ({cfg.duration / result.wall_s:.1f}x real "
-          f"time); {result.waypoints} waypoints, {result.frames} frames, {result.clouds} stereo clouds")
+    mission = _mission(args)
+    behavior, duration = mission.decide.behavior, mission.evaluation.duration
+    result = run_mission(mission, Path(mission.evaluation.out) / (args.name or f"demo-{Path(behavior).stem}"))
+    print(_table({behavior: result.final}))
+    print(f"{duration:.0f} simulated s in {result.wall_s:.1f} s wall ({duration / result.wall_s:.1f}x real "
+          f"time); {result.waypoints} waypoints, {result.frames} frames, {result.clouds} {mission.depth.source} clouds")
     print(f"report: {result.report['html']}")
 
 
-def _one(cfg, run_dir: str) -> tuple[str, dict[str, float], float]:
+def _one(mission, run_dir: str) -> tuple[str, dict[str, float], float]:
     """A study mission in a worker process (its progress bar silenced; the parent reports)."""
     from layerpilot.eval.mission import run_mission
 
     with open(os.devnull, "w") as quiet:
-        result = run_mission(cfg, run_dir, progress_stream=quiet)
+        result = run_mission(mission, run_dir, progress_stream=quiet)
     return run_dir, result.final, result.wall_s
 
 
@@ -91,36 +108,38 @@ def _study(args: argparse.Namespace) -> None:
 
     import numpy as np
 
-    from layerpilot.eval.mission import BASELINES
     from layerpilot.eval.summary import write_study_report
+    from layerpilot.mission.config import to_tables
+    from layerpilot.mission.pilot import PATTERNS, PilotConfig
     from layerpilot.progress import Progress
 
     if args.quick:
-        args.duration, args.seeds, args.camera = min(args.duration, 60.0), 1, "160x120"
-    behaviors = [b.strip() for b in args.behaviors.split(",") if b.strip()]
-    if not behaviors or args.seeds < 1 or args.jobs < 1:
-        raise ValueError("--behaviors, --seeds and --jobs need at least one each")
-    out = args.out / args.name
+        args.duration, args.seeds, args.camera = min(args.duration or 60.0, 60.0), 1, (160, 120)
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    mission = _mission(args)
+    ev = mission.evaluation
+    out = Path(ev.out) / args.name
     jobs: list[tuple[str, object, str]] = []
-    for behavior in behaviors:
-        # Scripted baselines have no decision noise: one run stands for every seed.
-        for seed in range(1 if behavior in BASELINES else args.seeds):
-            jobs.append((behavior, _config(args, behavior, seed), str(out / "runs" / f"{Path(behavior).stem}-s{seed}")))
-    runs: dict[str, list[str]] = {b: [] for b in behaviors}
-    finals: dict[str, list[dict[str, float]]] = {b: [] for b in behaviors}
+    for behavior in ev.behaviors:
+        # Scripted patterns have no decision noise: one run stands for every seed.
+        for seed in range(1 if behavior in PATTERNS else ev.seeds):
+            decide = PilotConfig(**{**mission.decide.__dict__, "behavior": behavior, "seed": seed})
+            jobs.append((behavior, mission.replace(decide=decide), str(out / "runs" / f"{Path(behavior).stem}-s{seed}")))
+    runs: dict[str, list[str]] = {b: [] for b in ev.behaviors}
+    finals: dict[str, list[dict[str, float]]] = {b: [] for b in ev.behaviors}
     progress = Progress(len(jobs), f"study ({len(jobs)} missions, {args.jobs} at a time)", " runs")
     progress.update(0)
     context = multiprocessing.get_context("spawn")  # fresh GL context and sockets per worker
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-        futures = {pool.submit(_one, cfg, run_dir): behavior for behavior, cfg, run_dir in jobs}
+        futures = {pool.submit(_one, m, run_dir): behavior for behavior, m, run_dir in jobs}
         for done, future in enumerate(as_completed(futures), start=1):
             run_dir, final, wall = future.result()
             runs[futures[future]].append(run_dir)
             finals[futures[future]].append(final)
             progress.update(done, f"{Path(run_dir).name} {final['percent_mapped']:.1f}% mapped in {wall:.0f}s")
     runs = {b: sorted(d) for b, d in runs.items()}
-    settings = {k: v for k, v in asdict(_config(args, "-", 0)).items() if k not in ("behavior", "seed")}
-    paths = write_study_report(out, runs, {**settings, "seeds": args.seeds, "quick": args.quick})
+    paths = write_study_report(out, runs, {"mission": to_tables(mission), "quick": args.quick})
     with warnings.catch_warnings():  # a metric that is NaN in every seed stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
         means = {b: {k: float(np.nanmean([f[k] for f in fs])) for k in fs[0]} for b, fs in finals.items()}

@@ -14,7 +14,7 @@ def register(commands: argparse._SubParsersAction) -> None:
                          "or an action (preview)",
                          "Without an action: serve the mission's simulated vehicle on MAVLink and publish "
                          "its camera frames on the bus (with camera_only = true: render the pose a real "
-                         "autopilot reports).")
+                         "autopilot reports).", flags={**SIM_FLAGS, "flavour": "sim.flavour", "speed": "speed"})
     _world_args(p)
     p.add_argument("--mavlink", metavar="URL", help="MAVLink URL to serve (default: the mission's for this vehicle)")
     p.add_argument("--flavour", choices=("ardupilot", "px4"), help="autopilot conventions (default: the mission's)")
@@ -33,36 +33,26 @@ def register(commands: argparse._SubParsersAction) -> None:
     pv.set_defaults(func=_preview)
 
 
+SIM_FLAGS = {"seed": "sim.world.seed", "rate": "sim.frame_rate_hz"}  # option dest -> mission key
+
+
 def _world_args(p: argparse.ArgumentParser, default: Any = None) -> None:
     p.add_argument("--seed", type=int, default=default, help="world seed (default: the mission's)")
     p.add_argument("--rate", type=float, default=default, help="camera frames per mission second (default: the mission's)")
 
 
-def sim_config(args: argparse.Namespace, tables: dict[str, Any], **overrides: Any):
-    """The mission's ``[sim]`` table as a SimConfig, with the command line's overrides."""
+def _node(args, mission, vehicle, session) -> Running:
     import dataclasses
 
-    from layerpilot.config import from_dict
-    from layerpilot.sim.simulator import SimConfig
-
-    config = from_dict(SimConfig, tables.get("sim", {}), "sim")
-    if args.seed is not None:
-        config = dataclasses.replace(config, world=dataclasses.replace(config.world, seed=args.seed))
-    given = {"frame_rate_hz": args.rate, "flavour": args.flavour, **overrides}
-    return dataclasses.replace(config, **{k: v for k, v in given.items() if v is not None})
-
-
-def _node(args, mission, tables, vehicle, session) -> Running:
     from layerpilot.nodes.sim import CameraOnlyNode, SimNode
 
     if mission.camera_only:
-        node = CameraOnlyNode(session, vehicle, sim_config(args, tables))
+        node = CameraOnlyNode(session, vehicle, mission.sim)
         return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
                        info={"camera_only": True}, run=node.run)
-    config = sim_config(args, tables, urls=(args.mavlink or mission.mavlink_url(vehicle),))
-    speed = mission.speed if args.speed is None else args.speed
+    config = dataclasses.replace(mission.sim, urls=(args.mavlink or mission.mavlink_url(vehicle),))
     try:
-        node = SimNode(session, vehicle, config, speed=speed, duration=args.duration)
+        node = SimNode(session, vehicle, config, speed=mission.speed, duration=args.duration)
     except OSError as exc:  # the MAVLink port is taken or the address is wrong
         raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
     return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, info=node.describe(),
@@ -70,11 +60,11 @@ def _node(args, mission, tables, vehicle, session) -> Running:
 
 
 def _preview(args: argparse.Namespace) -> None:
-    from layerpilot.nodes.mission import load_mission
+    from layerpilot.cli.nodes import mission_from_args
     from layerpilot.eval.pictures.sim_preview import write_preview
     from layerpilot.sim.world import World
 
-    config = sim_config(args, load_mission(args.config)[1])
+    config = mission_from_args(args, SIM_FLAGS).sim
     info = write_preview(World(config.world), config.camera, args.x, args.y, args.agl, args.yaw, args.out)
     print(f"wrote {info['path']} (depth {info['depth_min_m']:.1f}-{info['depth_max_m']:.1f} m, "
           f"sky {100 * info['sky_fraction']:.0f}%, {info['renderer']})")

@@ -35,6 +35,10 @@ class DropOldest(Generic[T]):
             self._cond.wait_for(lambda: self._items or self._closed, timeout)
             return None if self._closed or not self._items else self._items.popleft()
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def close(self) -> None:
         with self._cond:
             self._closed = True

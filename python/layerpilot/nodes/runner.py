@@ -1,29 +1,24 @@
-"""What every node process shares: config file loading, logging, and SIGTERM = finish and exit."""
+"""What every node process shares: its bus settings, logging, and SIGTERM = finish and exit."""
 
 from __future__ import annotations
 
+import dataclasses
 import faulthandler
 import logging
 import signal
 import threading
-from pathlib import Path
-from typing import Any
 
 from layerpilot.bus.session import BusConfig
-from layerpilot.config import ConfigError, from_dict, load_toml
+from layerpilot.config import ConfigError
 
 
-def load_tables(path: str | Path | None) -> dict[str, Any]:
-    return load_toml(path) if path else {}
-
-
-def bus_config(tables: dict[str, Any], endpoint: str | None, mode: str | None = None) -> BusConfig:
-    data = dict(tables.get("bus", {}))
-    if endpoint:
-        data["endpoint"] = endpoint
-    if mode:
-        data["mode"] = mode
-    return from_dict(BusConfig, data, "bus")
+def bus_config(bus: BusConfig, endpoint: str | None, mode: str | None = None) -> BusConfig:
+    """The mission's bus settings with the command line's ``--endpoint`` (and a router's mode)."""
+    changes = {k: v for k, v in (("endpoint", endpoint), ("mode", mode)) if v}
+    try:
+        return dataclasses.replace(bus, **changes)
+    except ConfigError as exc:
+        raise ConfigError(f"--endpoint {endpoint!r}: {exc}") from None
 
 
 STUCK_AFTER = 10.0  # s after SIGTERM: dump every thread's stack to stderr
@@ -55,4 +50,4 @@ def wait_for_stop(stop: threading.Event) -> None:
         pass
 
 
-__all__ = ["ConfigError", "WAKE_PERIOD", "bus_config", "load_tables", "stop_event", "wait_for_stop"]
+__all__ = ["WAKE_PERIOD", "bus_config", "stop_event", "wait_for_stop"]

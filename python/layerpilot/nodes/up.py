@@ -2,6 +2,9 @@
 
 ``up`` itself opens the first Zenoh session, so it holds the well-known endpoint for the
 whole mission: nodes that die and restart always find the same place to connect to.
+With ``bus.security`` on (the default) that session is the mission's hub: a router that admits
+only the users whose credentials ``up`` writes into the secrets directory and enforces the
+mission's allow-list (bus/security.py); each node gets its own ``--credentials`` file.
 """
 
 from __future__ import annotations
@@ -16,9 +19,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from layerpilot.nodes.mission import load_mission, resolve
+from layerpilot.mission.config import load_mission, resolve
 
-RESTART_DELAY = 1.0  # s
+RESTART_DELAY = 1.0  # s before the first restart; doubled after each failure in a row
+MAX_RESTART_DELAY = 30.0  # s
+HEALTHY_AFTER = 60.0  # s alive: the node's failures in a row start over
+MAX_FAILURES = 5  # failures in a row after which a node is reported failed and left down
 CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
 STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL
 
@@ -34,13 +40,19 @@ class NodeProcess:
     status: dict = field(default_factory=dict)
     started: float = 0.0
     exit_codes: list[int] = field(default_factory=list)
+    failures_in_a_row: int = 0
+    restart_at: float = 0.0  # monotonic time of the next restart (backoff)
+    failed: str = ""  # set once the node is given up on: its last error line
+    heard_at: float = 0.0  # monotonic time of its last status line
+    log_path: Path | None = None
 
     def start(self, log_dir: Path) -> None:
         log_dir.mkdir(parents=True, exist_ok=True)
-        with open(log_dir / (self.name.replace("/", "-") + ".log"), "a") as log:
+        self.log_path = log_dir / (self.name.replace("/", "-") + ".log")
+        with open(self.log_path, "a") as log:
             self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=log, text=True,
                                          start_new_session=True)  # Ctrl-C reaches `up` only; `up` stops the nodes
-        self.started = time.monotonic()
+        self.started = self.heard_at = time.monotonic()
         threading.Thread(target=self._read, args=(self.proc,), daemon=True).start()
 
     def _read(self, proc: subprocess.Popen) -> None:
@@ -49,32 +61,54 @@ class NodeProcess:
                 self.status = json.loads(line)
             except json.JSONDecodeError:
                 continue
+            self.heard_at = time.monotonic()
 
     def alive(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
 
+    def last_error(self) -> str:
+        """The node's last word: its failure status line, else the last line of its log."""
+        if self.status.get("status") == "failed":
+            return str(self.status.get("error", ""))
+        try:
+            lines = [ln for ln in self.log_path.read_text(errors="replace").splitlines() if ln.strip()]
+        except (OSError, AttributeError):
+            return ""
+        return lines[-1] if lines else ""
+
     def line(self) -> str:
-        state = "alive" if self.alive() else "DOWN"
+        state = "FAILED" if self.failed else "alive" if self.alive() else "DOWN"
+        if self.failed:
+            return f"{self.name:<16} {state:<6} restarts={self.restarts} last error: {self.failed}"
         info = {k: v for k, v in self.status.items() if k not in ("node", "vehicle", "status")}
         pid = self.proc.pid if self.proc is not None else "-"
         return f"{self.name:<16} {state:<5} pid={pid} restarts={self.restarts} " + " ".join(f"{k}={v}" for k, v in info.items())
 
 
-def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None) -> list[NodeProcess]:
-    """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide."""
+def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
+                  secrets=None) -> list[NodeProcess]:
+    """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide; with
+    ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file."""
+    from layerpilot.bus.security import node_user
+
     base = [sys.executable, "-m", "layerpilot.cli"]
     common = ["--config", str(mission_path)] + (["--endpoint", endpoint] if endpoint else [])
-    nodes = [NodeProcess("map-server", base + ["map-server"] + common)]
+
+    def login(role: str, vehicle: str | None = None) -> list[str]:
+        return [] if secrets is None else ["--credentials", str(secrets.credentials_file(node_user(role, vehicle)))]
+
+    nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
         for role in ("sim", "link", "depth", "decide"):
-            nodes.append(NodeProcess(f"{role}/{v}", base + [role, "--vehicle", v] + common))
+            nodes.append(NodeProcess(f"{role}/{v}", base + [role, "--vehicle", v] + common + login(role, v)))
     return nodes
 
 
 class Supervisor:
-    def __init__(self, nodes: list[NodeProcess], log_dir: Path) -> None:
+    def __init__(self, nodes: list[NodeProcess], log_dir: Path, silent_after: float = 30.0) -> None:
         self.nodes = nodes
         self.log_dir = log_dir
+        self.silent_after = silent_after  # s without a status line: the whole process is stuck
         self.stopping = threading.Event()
 
     def start(self) -> None:
@@ -82,16 +116,32 @@ class Supervisor:
             n.start(self.log_dir)
 
     def check(self) -> list[str]:
-        """Restart every node that died (after RESTART_DELAY); returns what happened."""
+        """Restart every node that died, with exponential backoff; give up after MAX_FAILURES in a row."""
         events = []
+        now = time.monotonic()
         for n in self.nodes:
-            if n.proc is not None and not n.alive() and not self.stopping.is_set():
+            if n.alive() and now - n.heard_at > self.silent_after and not self.stopping.is_set():
+                events.append(f"{n.name} STALLED: no status line for {now - n.heard_at:.0f} s; killing it")
+                n.proc.kill()
+                n.proc.wait()
+            if n.proc is None or n.alive() or n.failed or self.stopping.is_set():
+                continue
+            if n.restart_at == 0.0:  # just found dead
                 code = n.proc.returncode
-                if time.monotonic() - n.started < RESTART_DELAY:
-                    continue
                 n.exit_codes.append(code)
+                n.failures_in_a_row = 1 if now - n.started >= HEALTHY_AFTER else n.failures_in_a_row + 1
+                error = n.last_error()
+                if n.failures_in_a_row >= MAX_FAILURES:
+                    n.failed = error or f"exit code {code}"
+                    events.append(f"{n.name} FAILED: exited with {code} {n.failures_in_a_row} times in a row; "
+                                  f"last error: {n.failed}")
+                    continue
+                delay = min(RESTART_DELAY * 2 ** (n.failures_in_a_row - 1), MAX_RESTART_DELAY)
+                n.restart_at = now + delay
+                events.append(f"{n.name} exited with {code} ({error}); restarting in {delay:.0f} s")
+            elif now >= n.restart_at:
+                n.restart_at = 0.0
                 n.restarts += 1
-                events.append(f"{n.name} exited with {code}; restarting")
                 n.start(self.log_dir)
         return events
 
@@ -113,20 +163,32 @@ class Supervisor:
 
 
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
-       duration: float | None = None, log_dir: str | Path = "runs/logs") -> int:
+       duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
+       operator_can_save: bool = False) -> int:
+    """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``)."""
+    from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
     from layerpilot.nodes.runner import bus_config
 
     path = resolve(mission)
-    m, tables = load_mission(path)  # refuse a bad file before anything starts
+    m = load_mission(path)  # refuse a bad file before anything starts
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    session = open_session(bus_config(tables, endpoint))  # the hub: holds the well-known endpoint
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint), Path(log_dir))
+    bus, secrets = bus_config(m.bus, endpoint), None
+    if bus.security:  # the hub: holds the well-known endpoint, checks every login, enforces the allow-list
+        secrets_dir = Path(log_dir).parent / "bus-secrets" if secrets_dir is None else Path(secrets_dir)
+        session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
+    else:
+        session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets), Path(log_dir),
+                     silent_after=max(30.0, 5 * status_every))
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/", flush=True)
+    print(f"layerpilot up: bus secured: operator credentials in {secrets.credentials_file('operator')}"
+          if secrets else "layerpilot up: bus.security = false: ANY process that reaches "
+          f"{bus.endpoint} can publish waypoints", flush=True)
     t0 = time.monotonic()
     next_status, end = t0 + status_every, math.inf if duration is None else t0 + duration
     try:

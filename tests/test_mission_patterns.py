@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from layerpilot.sim.baselines import footprint_width, lawnmower, orbit, path_length, survey_speed
+from layerpilot.mission.patterns import footprint_width, lawnmower, orbit, path_length, survey_speed
 from layerpilot.sim.camera import CameraConfig, camera_pose
 
 

@@ -1,0 +1,48 @@
+"""Step objects from a mission: the one place where the live nodes and the evaluator get them."""
+
+from __future__ import annotations
+
+from layerpilot.link.geofence import Geofence
+from layerpilot.mission.config import Mission
+from layerpilot.mission.depth_service import DepthService, stereo_preset
+from layerpilot.mission.pilot import Pilot, load_pilot_behavior
+
+
+def build_pilot(mission: Mission) -> Pilot:
+    """The mission's pilot: the decision maker, or a pattern flown at the survey speed its camera allows."""
+    cfg = mission.decide
+    behavior = load_pilot_behavior(cfg.behavior)
+    if cfg.pattern is None:
+        return Pilot(cfg, behavior, seed=cfg.seed)
+    from layerpilot.mission import patterns
+
+    camera, altitude = mission.sim.camera, behavior.altitude
+    centre, radius = behavior.area.center or cfg.home, behavior.area.radius
+    if cfg.pattern == "lawnmower":
+        waypoints = patterns.lawnmower(centre, radius, altitude, camera, altitude)
+        # straight legs at top speed put frames too far apart for stereo: fly at the survey speed
+        ratio = stereo_preset(camera.width).pick.target_baseline_ratio
+        speed = patterns.survey_speed(camera, altitude, mission.sim.frame_rate_hz, ratio)
+    else:
+        waypoints, speed = patterns.orbit(centre, radius, altitude), cfg.speed
+    return Pilot(cfg, behavior, pattern=waypoints, pattern_speed=speed)
+
+
+def build_depth_service(mission: Mission) -> DepthService:
+    return DepthService(mission.depth)
+
+
+def geofence_for(mission: Mission) -> Geofence:
+    """The mission's geofence, which the link enforces whoever sends a waypoint (the live link node,
+    `layerpilot link` actions and the lock-step evaluator all take it from here).
+
+    Area: the decide behavior's area of interest (a pattern's: the balanced preset's), a circle
+    around ``area.center`` (else ``decide.home``) or its polygon, widened by
+    ``link.geofence_margin``; heights above home: ``link.link.alt_min_m`` .. ``alt_max_m``.
+    """
+    area = load_pilot_behavior(mission.decide.behavior).area
+    limits = dict(margin=mission.link.geofence_margin, alt_min=mission.link.link.alt_min_m,
+                  alt_max=mission.link.link.alt_max_m)
+    if area.shape == "polygon":
+        return Geofence.polygon_of(area.polygon, **limits)
+    return Geofence.circle(area.center if area.center is not None else mission.decide.home, area.radius, **limits)

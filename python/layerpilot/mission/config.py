@@ -1,0 +1,152 @@
+"""One typed mission: a TOML file parsed once into sections that every command reads.
+
+``layerpilot up``, every node, ``demo`` and ``study`` take a mission file (a path or a name
+in config/missions/); command-line flags override fields of it. Unknown keys and
+out-of-range values are errors that name the key (``map_server.resolution``), or, when a
+flag set the value, the flag (``--world-size must be in [20.0, 5000.0], got -1.0``).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from layerpilot.bus.keys import check_vehicle
+from layerpilot.bus.session import BusConfig
+from layerpilot.config import ConfigError, RangeError, check_range, from_dict, load_toml, shipped_config
+from layerpilot.link.config import LinkConfig
+from layerpilot.mission.depth_service import DepthServiceConfig
+from layerpilot.mission.map_service import MapServiceConfig
+from layerpilot.mission.pilot import PilotConfig
+from layerpilot.sim.simulator import SimConfig
+
+MISSION_DIR = shipped_config("missions")
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    """The ``[link]`` table: the flight link's settings (``[link.link]``) plus the link node's own."""
+
+    link: LinkConfig = field(default_factory=LinkConfig)
+    takeoff_altitude: float = 30.0  # m above home
+    pose_rate: float = 10.0  # Hz
+    geofence_margin: float = 20.0  # m the geofence reaches beyond the behavior's area of interest
+
+    def __post_init__(self) -> None:
+        check_range("link.takeoff_altitude", self.takeoff_altitude, 1.0, 500.0)
+        check_range("link.pose_rate", self.pose_rate, 0.1, 100.0)
+        check_range("link.geofence_margin", self.geofence_margin, 0.0, 10_000.0)
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """The ``[evaluation]`` table: how ``demo`` and ``study`` fly the mission in lock-step and score it."""
+
+    duration: float = 600.0  # mission seconds
+    step_s: float = 0.05  # simulator step of the lock-step loop
+    seeds: int = 3  # decision seeds per MCDM behavior in a study
+    behaviors: list[str] = field(default_factory=lambda: ["balanced", "exploration", "time", "distance",
+                                                          "lawnmower", "orbit"])  # a study's behaviors
+    out: str = "runs"  # parent directory of run directories
+
+    def __post_init__(self) -> None:
+        check_range("evaluation.duration", self.duration, 1.0, 36_000.0)
+        check_range("evaluation.step_s", self.step_s, 0.005, 0.5)
+        check_range("evaluation.seeds", self.seeds, 1, 100)
+        if not self.behaviors:
+            raise ConfigError("evaluation.behaviors: give at least one behavior")
+
+
+@dataclass(frozen=True)
+class Mission:
+    """Which vehicles fly, and one typed section per part of the system."""
+
+    description: str = ""
+    vehicles: list[str] = field(default_factory=lambda: ["uav1"])
+    speed: float = 1.0  # simulator pace in live missions (x real time)
+    camera_only: bool = False  # the vehicle is a real autopilot (SITL) at link.link.url; sim only renders
+    mavlink_port: int = 5760  # vehicle i's simulator serves MAVLink on tcp:127.0.0.1:<mavlink_port + 10 i>
+    bus: BusConfig = field(default_factory=BusConfig)
+    map_server: MapServiceConfig = field(default_factory=MapServiceConfig)
+    depth: DepthServiceConfig = field(default_factory=DepthServiceConfig)
+    decide: PilotConfig = field(default_factory=PilotConfig)
+    link: LinkSettings = field(default_factory=LinkSettings)
+    sim: SimConfig = field(default_factory=SimConfig)
+    evaluation: EvaluationSettings = field(default_factory=EvaluationSettings)
+
+    def __post_init__(self) -> None:
+        check_range("speed", self.speed, 0.01, 100.0)
+        check_range("mavlink_port", self.mavlink_port, 1024, 65000)
+        if not self.vehicles or len(set(self.vehicles)) != len(self.vehicles):
+            raise ConfigError(f"vehicles: need one or more distinct names, got {self.vehicles}")
+        for v in self.vehicles:
+            check_vehicle(v)
+
+    def mavlink_url(self, vehicle: str) -> str:
+        return f"tcp:127.0.0.1:{self.mavlink_port + 10 * self.vehicles.index(vehicle)}"
+
+    def replace(self, **sections: Any) -> "Mission":
+        return dataclasses.replace(self, **sections)
+
+
+@dataclass(frozen=True)
+class Override:
+    """A command-line flag that sets one field: ``Override("--world-size", "sim.world.size", -1.0)``."""
+
+    flag: str
+    key: str  # dotted path into the mission's tables
+    value: Any
+
+
+def resolve(name_or_path: str | Path | None) -> Path:
+    """``None`` -> the default mission; a bare name -> config/missions/<name>.toml; else a path."""
+    if name_or_path is None:
+        return MISSION_DIR / "default.toml"
+    p = Path(name_or_path)
+    if p.suffix != ".toml" and not p.exists():
+        p = MISSION_DIR / f"{p}.toml"
+    return p
+
+
+def load_mission(name_or_path: str | Path | None = None, overrides: list[Override] = ()) -> Mission:
+    """Parse and validate a mission file, then apply flag overrides (errors name the flag)."""
+    path = resolve(name_or_path)
+    tables = load_toml(path)
+    try:
+        mission = from_dict(Mission, tables, "mission")
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    return apply_overrides(mission, tables, overrides) if overrides else mission
+
+
+def apply_overrides(mission: Mission, tables: dict[str, Any], overrides: list[Override]) -> Mission:
+    """The mission with each flag's value set; a bad value is reported under the flag's name."""
+    merged = copy.deepcopy(tables)
+    for o in overrides:
+        one = copy.deepcopy(tables)
+        _set(one, o.key, o.value)
+        try:
+            from_dict(Mission, one, "mission")
+        except RangeError as exc:
+            raise ConfigError(f"{o.flag} {exc.requirement()}, got {o.value}") from None
+        except ConfigError as exc:
+            reason = str(exc).split(": ", 1)[-1] if ": " in str(exc) else str(exc)
+            raise ConfigError(f"{o.flag} {o.value!r}: {reason}") from None
+        _set(merged, o.key, o.value)
+    return from_dict(Mission, merged, "mission")
+
+
+def _set(tables: dict[str, Any], key: str, value: Any) -> None:
+    *parents, leaf = key.split(".")
+    node = tables
+    for name in parents:
+        node = node.setdefault(name, {})
+    node[leaf] = value
+
+
+def to_tables(mission: Mission) -> dict[str, Any]:
+    """The mission as plain tables (for run reports and for handing a parsed mission to a process)."""
+    return dataclasses.asdict(mission)

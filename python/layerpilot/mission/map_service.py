@@ -1,0 +1,155 @@
+"""The map service: one fused voxel map, its layer windows, voxel boxes and snapshot policy.
+
+Transport-free: the map server node decodes clouds and queries and calls it; the lock-step
+evaluator calls it directly. Every request is checked before anything is allocated, so a
+query for a window at x = 1e300 is a ``ValueError`` naming ``x``, not an overflow.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from layerpilot.config import check_range
+from layerpilot.map import VoxelMap
+from layerpilot.map.columns import ColumnLayers
+from layerpilot.map.voxel_map import KEY_OFFSET, InsertResult, Voxels
+
+_log = logging.getLogger("layerpilot.map_server")
+COLUMN_LAYERS = ("observed", "elevation", "color", "last_seen", "min_distance")
+MAX_WINDOW = 2048  # cells per side of a layer window
+MAX_BOX = 512  # voxels per side of a voxel box
+
+
+@dataclass(frozen=True)
+class MapServiceConfig:
+    """The ``[map_server]`` table of a mission file."""
+
+    resolution: float = 1.0
+    layers_rate: float = 1.0  # Hz (mission time): a layer set per vehicle this often
+    window: tuple[float, float, int, int] = (-128.0, -128.0, 256, 256)  # x, y (south-west, m), w, h (cells)
+    layers: tuple[str, ...] = COLUMN_LAYERS  # what the pilots need
+    snapshot: str = "runs/map.ot"  # "" = no snapshots
+    snapshot_period: float = 30.0  # s (mission time)
+    snapshot_keep: int = 3  # good snapshots kept (newest first)
+    queue_size: int = 8  # clouds waiting for insertion; the oldest is dropped beyond
+    max_range: float = 100.0  # m, for clouds that do not say
+    query_threads: int = 2
+    max_voxels: int = 100_000  # voxels per voxel-query reply; more come in pages
+
+    def __post_init__(self) -> None:
+        check_range("map_server.resolution", self.resolution, 0.01, 10.0)
+        check_range("map_server.layers_rate", self.layers_rate, 0.01, 100.0)
+        check_range("map_server.snapshot_period", self.snapshot_period, 0.1)
+        check_range("map_server.snapshot_keep", self.snapshot_keep, 1, 100)
+        check_range("map_server.queue_size", self.queue_size, 1, 10_000)
+        check_range("map_server.max_range", self.max_range, 0.1, 10_000.0)
+        check_range("map_server.query_threads", self.query_threads, 1, 64)
+        check_range("map_server.max_voxels", self.max_voxels, 1, 10_000_000)
+        check_range("map_server.window width", self.window[2], 1, MAX_WINDOW)
+        check_range("map_server.window height", self.window[3], 1, MAX_WINDOW)
+        if not set(self.layers) <= set(COLUMN_LAYERS):
+            raise ValueError(f"map_server.layers: unknown {sorted(set(self.layers) - set(COLUMN_LAYERS))}; "
+                             f"known: {', '.join(COLUMN_LAYERS)}")
+
+
+@dataclass(frozen=True)
+class VoxelPage:
+    voxels: Voxels
+    offset: int
+    total: int  # voxels in the box; the next page starts at offset + len(voxels)
+
+
+class MapService:
+    """Insert clouds, answer layer windows and voxel boxes, decide when to snapshot."""
+
+    def __init__(self, cfg: MapServiceConfig, voxel_map: VoxelMap | None = None) -> None:
+        self.cfg = cfg
+        self.map = voxel_map if voxel_map is not None else VoxelMap(cfg.resolution)
+        if not np.isclose(self.map.resolution, cfg.resolution):
+            raise ValueError(f"map resolution {self.map.resolution} != map_server.resolution {cfg.resolution}")
+        self.clouds_inserted = 0
+        self.points_inserted = 0
+        self.last_stamp = 0.0  # newest mission-clock stamp inserted (stamps the layer sets)
+        self._lock = threading.Lock()
+        self._dirty = False
+        self._last_snapshot = -math.inf
+
+    def insert(self, points: np.ndarray, origin: np.ndarray, colors: np.ndarray | None, stamp: float,
+               max_range: float | None = None) -> InsertResult:
+        """One cloud into the map (ValueError names a bad argument; the map is then unchanged)."""
+        if not math.isfinite(stamp):
+            raise ValueError(f"stamp: must be finite, got {stamp}")
+        result = self.map.insert(points, origin, colors, stamp=stamp, max_range=max_range or self.cfg.max_range)
+        with self._lock:
+            self.clouds_inserted += 1
+            self.points_inserted += result.points_used
+            self.last_stamp = max(self.last_stamp, stamp)
+            self._dirty = True
+        return result
+
+    def columns(self, x: float | None = None, y: float | None = None, w: int | None = None,
+                h: int | None = None) -> ColumnLayers:
+        """Column layers of a window (default: the configured one); a window off the map's key range is refused."""
+        x0, y0, w0, h0 = self.cfg.window
+        x, y = x0 if x is None else x, y0 if y is None else y
+        w, h = w0 if w is None else w, h0 if h is None else h
+        for name, value in (("x", x), ("y", y)):
+            if not math.isfinite(value) or abs(value) / self.map.resolution > KEY_OFFSET - MAX_WINDOW - 1:
+                raise ValueError(f"{name}: {value} is outside the map (|{name}| < "
+                                 f"{(KEY_OFFSET - MAX_WINDOW - 1) * self.map.resolution:g} m)")
+        if not (0 < w <= MAX_WINDOW and 0 < h <= MAX_WINDOW):
+            raise ValueError(f"w, h: must be in 1..{MAX_WINDOW}, got {w}x{h}")
+        return self.map.column_layers(x, y, int(w), int(h))
+
+    def voxels(self, lo: np.ndarray, hi: np.ndarray, min_occupancy: float | None = None, offset: int = 0) -> VoxelPage:
+        """Occupied voxels in a box, at most ``max_voxels`` per page from ``offset``."""
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        if lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError("min, max: expected three finite numbers each")
+        if np.any(hi - lo > MAX_BOX * self.map.resolution):
+            raise ValueError(f"box: at most {MAX_BOX} voxels per side")
+        if offset < 0:
+            raise ValueError(f"offset: must be >= 0, got {offset}")
+        v = self.map.voxels(lo, hi, min_occupancy)
+        end = min(len(v), offset + self.cfg.max_voxels)
+        page = Voxels(*(getattr(v, f)[offset:end] for f in ("centers", "occupancy", "color", "last_seen",
+                                                            "min_distance")))
+        return VoxelPage(page, offset, len(v))
+
+    # --- snapshots ------------------------------------------------------------------------
+
+    def snapshot_due(self, now: float) -> bool:
+        """A snapshot is due when the map changed and ``snapshot_period`` passed since the last one."""
+        return bool(self.cfg.snapshot) and self._dirty and now - self._last_snapshot >= self.cfg.snapshot_period
+
+    def snapshot(self, now: float | None = None) -> int:
+        """Write the map to the snapshot store; returns the bytes written."""
+        if not self.cfg.snapshot:
+            raise ValueError("map_server.snapshot: no snapshot path configured")
+        from layerpilot.map.snapshots import SnapshotStore
+
+        self._dirty = False
+        if now is not None:
+            self._last_snapshot = now
+        return SnapshotStore(Path(self.cfg.snapshot), self.cfg.snapshot_keep).save(self.map)
+
+    @classmethod
+    def start(cls, cfg: MapServiceConfig) -> "MapService":
+        """The service on the newest good snapshot, or on an empty map (damage is logged, never fatal)."""
+        if not cfg.snapshot:
+            return cls(cfg)
+        from layerpilot.map.snapshots import SnapshotStore
+
+        m, events = SnapshotStore(Path(cfg.snapshot), cfg.snapshot_keep).load_newest_good(cfg.resolution)
+        if m is None:
+            if Path(cfg.snapshot).exists() or events:
+                _log.error("no good snapshot at %s: starting with an empty map", cfg.snapshot)
+            return cls(cfg)
+        _log.info("reloaded snapshot %s (%d leaves)", cfg.snapshot, m.stats()["leaves"])
+        return cls(cfg, m)

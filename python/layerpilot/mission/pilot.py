@@ -1,0 +1,163 @@
+"""The pilot: one step object that says where the drone flies next, whoever drives it.
+
+The live decide node and the lock-step evaluator both call :meth:`Pilot.step` with the
+newest pose, mission time and column layers; it returns a :class:`Command` when the drone
+must fly somewhere new (first tick, target reached, or a better target while flying when
+the behavior opts into retargeting) and ``None`` otherwise. Arrival is one rule
+(horizontal distance to the target), and the choice is the MCDM decision maker or a
+scripted pattern (lawnmower, orbit), so what the study scores is what flies.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from layerpilot.config import check_range
+from layerpilot.decide.behavior import Behavior, load_behavior
+from layerpilot.decide.decision import Decision
+from layerpilot.decide.maker import DecisionMaker
+from layerpilot.layers import LayerContext, compute_layers
+from layerpilot.map.columns import ColumnLayers
+
+PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
+
+
+@dataclass(frozen=True)
+class PilotConfig:
+    """The ``[decide]`` table of a mission file (one per vehicle)."""
+
+    behavior: str = "balanced"  # preset name, .toml path, or a pattern: lawnmower, orbit
+    arrival_radius: float = 3.0  # m, horizontal: the target counts as reached
+    home: tuple[float, float] = (0.0, 0.0)  # launch / operator point (map frame)
+    speed: float = 0.0  # m/s sent with each MCDM waypoint, 0 = autopilot default (patterns set their own)
+    seed: int | None = None  # decision noise seed; None = the behavior's
+
+    def __post_init__(self) -> None:
+        check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)
+        check_range("decide.speed", self.speed, 0.0, 100.0)
+        load_pilot_behavior(self.behavior)  # a bad name or file fails when the mission loads
+
+    @property
+    def pattern(self) -> str | None:
+        return self.behavior if self.behavior in PATTERNS else None
+
+
+def load_pilot_behavior(name: str) -> Behavior:
+    """The behavior a pilot flies; a pattern flies the balanced preset's area and altitude."""
+    behavior = load_behavior("balanced" if name in PATTERNS else name)
+    return behavior
+
+
+@dataclass(frozen=True)
+class Command:
+    """Fly to ``position`` (map frame) holding ``yaw`` (ENU rad) at ``speed`` m/s (0 = autopilot default)."""
+
+    seq: int
+    time: float
+    position: tuple[float, float, float]
+    yaw: float
+    speed: float
+    decision: Decision | None  # None for a scripted pattern
+    reason: str  # "start", "reached", "retarget"
+
+    def record(self) -> dict[str, Any]:
+        """One JSON-ready line for decisions.jsonl (the same in every driver)."""
+        out: dict[str, Any] = {"seq": self.seq, "time": self.time, "waypoint": list(self.position),
+                               "yaw": self.yaw, "speed": self.speed, "reason": self.reason}
+        if self.decision is None:
+            out["scripted"] = True
+        else:
+            out.update(self.decision.to_dict())
+            out["explanation"] = self.decision.explain()
+        return out
+
+
+class Pilot:
+    """Arrival check, decision maker or pattern, retargeting; transport-free and deterministic.
+
+    ``pattern``: (N, 4) waypoints x, y, z, yaw flown in a loop (a patrol), or None for MCDM.
+    """
+
+    def __init__(self, cfg: PilotConfig, behavior: Behavior, *, pattern: np.ndarray | None = None,
+                 pattern_speed: float = 0.0, seed: int | None = None) -> None:
+        self.cfg = cfg
+        self.behavior = behavior
+        self.pattern = pattern
+        self.pattern_speed = pattern_speed
+        self.maker = None if pattern is not None else DecisionMaker(behavior, cfg.home, seed=seed)
+        self.target: np.ndarray | None = None
+        self.seq = 0
+        self.reached = 0
+        self.evaluations = 0  # decide + reconsider calls: when the pilot looked at the layers
+        self._next_pattern = 0
+        self._reconsidered: ColumnLayers | None = None
+
+    @property
+    def cruise_speed(self) -> float:
+        """The speed every command of this pilot carries (m/s, 0 = the autopilot's default)."""
+        return self.pattern_speed if self.pattern is not None else self.cfg.speed
+
+    @property
+    def retargets(self) -> bool:
+        return self.maker is not None and self.behavior.retarget.enabled
+
+    def arrived(self, position: Sequence[float]) -> bool:
+        """Horizontal distance to the target within ``arrival_radius`` (the altitude is the autopilot's job)."""
+        if self.target is None:
+            return False
+        return math.hypot(position[0] - self.target[0], position[1] - self.target[1]) <= self.cfg.arrival_radius
+
+    def step(self, position: Sequence[float], time: float, columns: ColumnLayers | None,
+             avoid: Sequence[Sequence[float]] = ()) -> Command | None:
+        """A new command when one is due, else None. ``columns``: the newest column layers (None: none yet).
+
+        ``avoid``: other drones' current targets (x, y); the maker keeps r_e away from them.
+        A retargeting behavior is reconsidered once per new ``columns`` object while flying.
+        """
+        reason = None
+        if self.target is None:
+            reason = "start"
+        elif self.arrived(position):
+            self.reached += 1
+            reason = "reached"
+        if reason is not None:
+            if self.pattern is not None:
+                return self._from_pattern(time, reason)
+            if columns is None:
+                return None
+            self.evaluations += 1
+            self._reconsidered = columns
+            decision = self.maker.decide(self._layers(columns, position, time), position, time, avoid=avoid)
+            return self._from_decision(decision, position, time, reason)
+        if not self.retargets or columns is None or columns is self._reconsidered:
+            return None
+        self._reconsidered = columns
+        self.evaluations += 1
+        decision = self.maker.reconsider(self._layers(columns, position, time), position, time, avoid=avoid)
+        return None if decision is None else self._from_decision(decision, position, time, "retarget")
+
+    def _layers(self, columns: ColumnLayers, position: Sequence[float], time: float):
+        context = LayerContext(now=time, home=self.cfg.home, position=tuple(float(v) for v in position[:3]),
+                               options=self.behavior.layers)
+        return compute_layers(columns, context, self.behavior.layer_names)
+
+    def _from_decision(self, d: Decision, position: Sequence[float], time: float, reason: str) -> Command:
+        wp = tuple(float(v) for v in d.waypoint)
+        yaw = math.atan2(wp[1] - position[1], wp[0] - position[0])  # look where the drone goes
+        return self._command(time, wp, yaw, self.cruise_speed, d, reason)
+
+    def _from_pattern(self, time: float, reason: str) -> Command:
+        wp = self.pattern[self._next_pattern % len(self.pattern)]  # starts over when done, as a patrol would
+        self._next_pattern += 1
+        return self._command(time, tuple(float(v) for v in wp[:3]), float(wp[3]), self.cruise_speed, None, reason)
+
+    def _command(self, time: float, wp: tuple[float, float, float], yaw: float, speed: float,
+                 decision: Decision | None, reason: str) -> Command:
+        self.seq += 1
+        self.target = np.array(wp)
+        return Command(self.seq, float(time), wp, float(yaw), float(speed), decision, reason)
