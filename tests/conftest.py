@@ -43,6 +43,23 @@ def start_up(mission: Path, endpoint: str, log_dir: Path) -> tuple[subprocess.Po
     return up, lines
 
 
+def operator_session(endpoint: str, log_dir: Path, timeout: float = 20.0):
+    """The operator's session on the bus of a `start_up` mission: `up` writes the operator's credentials
+    into <log_dir>/../bus-secrets/ and then opens its hub; retried until both are there."""
+    from layerpilot.bus.security import JoinRefused, open_node_session
+    from layerpilot.bus.session import BusConfig
+
+    creds = Path(log_dir).parent / "bus-secrets" / "operator.json"
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            return open_node_session(BusConfig(endpoint=endpoint), creds)
+        except (JoinRefused, FileNotFoundError, ValueError):
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.2)
+
+
 def stop_up(up: subprocess.Popen) -> None:
     """SIGTERM, as Ctrl-C would; SIGKILL the whole group only if it is still there after 30 s."""
     if up.poll() is None:

@@ -1,4 +1,5 @@
-"""Zenoh sessions on loopback: peers meet at the first one's endpoint, router/client, access control."""
+"""Zenoh sessions on loopback: peers meet at the first one's endpoint, router/client (access control and
+logins: test_bus_security.py)."""
 
 from __future__ import annotations
 
@@ -44,43 +45,6 @@ def test_router_and_clients():
         assert received_after(b, "layerpilot/*/state", lambda: a.put("layerpilot/uav2/state", b"s")) == [b"s"]
     finally:
         for s in (a, b, router):
-            s.close()
-
-
-def access_control_example(users_file: str) -> tuple[dict, dict]:
-    """The docs/bus.md example: every node but `decide` is denied putting waypoints (router side)."""
-    acl = {
-        "enabled": True,
-        "default_permission": "allow",
-        "rules": [{"id": "no-waypoints", "messages": ["put"], "flows": ["ingress"], "permission": "deny",
-                   "key_exprs": ["layerpilot/*/waypoint"]}],
-        "subjects": [{"id": "not-decide", "usernames": ["link", "depth", "sim", "map-server"]}],
-        "policies": [{"rules": ["no-waypoints"], "subjects": ["not-decide"]}],
-    }
-    transport = {"auth": {"usrpwd": {"user": "router", "password": "router-secret", "dictionary_file": users_file}}}
-    return acl, transport
-
-
-def login(user: str) -> dict:
-    return {"auth": {"usrpwd": {"user": user, "password": f"{user}-secret"}}}
-
-
-def test_access_control_only_decide_publishes_waypoints(tmp_path):
-    users = tmp_path / "users.txt"
-    users.write_text("".join(f"{u}:{u}-secret\n" for u in ("decide", "link", "depth", "sim", "map-server")))
-    acl, transport = access_control_example(str(users))
-    ep = free_endpoint()
-    router = open_session(BusConfig(mode="router", endpoint=ep, access_control=acl, transport=transport))
-    decide, link, sim = (open_session(BusConfig(mode="client", endpoint=ep, transport=login(u)))
-                         for u in ("decide", "link", "sim"))
-    try:
-        key = "layerpilot/uav1/waypoint"
-        assert received_after(link, key, lambda: decide.put(key, b"decide")) == [b"decide"]
-        assert received_after(decide, key, lambda: link.put(key, b"link")) == []
-        assert received_after(link, key, lambda: sim.put(key, b"sim")) == []
-        assert received_after(decide, "layerpilot/uav1/pose", lambda: link.put("layerpilot/uav1/pose", b"p")) == [b"p"]
-    finally:
-        for s in (decide, link, sim, router):
             s.close()
 
 

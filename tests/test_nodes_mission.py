@@ -18,7 +18,7 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
-from conftest import SMALL_MISSION_NODES, start_up, stop_up
+from conftest import SMALL_MISSION_NODES, start_up, stop_up, operator_session
 
 K = Keys("uav1")
 K2 = Keys("uav2")
@@ -53,7 +53,7 @@ snapshot_period = 2.0
     client = None
     try:
         time.sleep(1.0)
-        client = open_session(BusConfig(endpoint=ep))
+        client = operator_session(ep, tmp_path / "logs")
         layer_stamps: list[float] = []
         waypoints: list[msg.Waypoint] = []
         poses: list[msg.State] = []
@@ -83,6 +83,11 @@ snapshot_period = 2.0
                 time.sleep(0.2)
 
         wait_for(lambda: len({w.seq for w in waypoints}) >= 3, "three waypoints")
+        # secure by default: an outside peer without credentials, on the mission's endpoint, steers nothing
+        outsider = open_session(BusConfig(endpoint=ep, security=False))
+        assert list(outsider.info.routers_zid()) == [] and list(outsider.info.peers_zid()) == []
+        outsider.put(K.waypoint, msg.encode_waypoint(msg.Waypoint(0.0, "uav1", 987654, np.array([300.0, 300.0, 50.0]))))
+        outsider.close()
         wait_for(lambda: (s := map_stats(client)) is not None and s.snapshots_written >= 1, "a snapshot")
         before = map_stats(client)
         time.sleep(2.5)  # let one more snapshot period pass with this map
@@ -98,6 +103,7 @@ snapshot_period = 2.0
         wait_for(lambda: layer_stamps[-1] >= 60.0 and max(w.seq for w in waypoints) >= seq_at_restart + 2,
                  "60 mission seconds and two more waypoints after the restart", timeout=120)
         final = map_stats(client)
+        assert 987654 not in {w.seq for w in waypoints}  # the hub never let the outsider's waypoint through
         assert final.leaves > before.leaves  # the map kept growing after the crash
         assert final.clouds_dropped == 0
 

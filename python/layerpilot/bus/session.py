@@ -4,11 +4,17 @@ Default: a peer on loopback, multicast scouting off, explicit endpoints. The fir
 to start listens on ``tcp/127.0.0.1:7447`` (Zenoh's usual port, so an outside peer can
 join the way ROS 2 users expect); later nodes find the port taken, listen on a free one
 and connect to the first. ``mode = "router"``/``"client"`` is for several machines.
-TLS and access control are Zenoh's own settings, passed through unchanged.
+TLS settings are Zenoh's own, passed through unchanged (so are ``transport.auth`` and
+``access_control``, but only with ``security = false``).
+
+``security = true`` (the default) is what `layerpilot up` and `layerpilot router` build the
+mission's hub from (bus/security.py: per-node logins, an allow-list, clients only); it also
+restricts the endpoints: loopback TCP, or TLS with client certificates and nothing else.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
 from dataclasses import dataclass, field
@@ -37,11 +43,55 @@ class BusConfig:
     multicast_scouting: bool = False
     transport: dict[str, Any] = field(default_factory=dict)  # Zenoh "transport" table (TLS certificates, auth)
     access_control: dict[str, Any] = field(default_factory=dict)  # Zenoh "access_control" table, as documented by Zenoh
+    security: bool = True  # per-node logins + the mission's allow-list on the hub; false only for debugging
+    operator_can_save: bool = False  # the operator's credentials may also query map/save
 
     def __post_init__(self) -> None:
         for ep in (self.endpoint, *self.listen, *self.connect):
             if "/" not in ep:
                 raise ConfigError(f"bus endpoint {ep!r} is not a Zenoh locator like tcp/127.0.0.1:7447")
+        if self.security:
+            self.check_security()
+
+    def check_security(self) -> None:
+        """With ``security`` on: the hub makes logins and the allow-list itself, and the bus is either
+        loopback TCP or TLS with client certificates (mutual TLS), never plain TCP beside TLS."""
+        off = "or set bus.security = false (debugging only)"
+        if self.access_control or "auth" in self.transport:
+            raise ConfigError("bus.access_control / bus.transport.auth: with bus.security on, the hub builds the "
+                              f"logins and the allow-list itself (docs/bus.md, Security); drop them {off}")
+        endpoints = [("bus.endpoint", self.endpoint)] + [(f"bus.{k}", e) for k in ("listen", "connect")
+                                                         for e in getattr(self, k)]
+        link = self.transport.get("link")
+        tls = link.get("tls") if isinstance(link, dict) else None
+        tls = tls if isinstance(tls, dict) else {}
+        any_tls = any(e.startswith("tls/") for _, e in endpoints)
+        for name, ep in endpoints:
+            proto = ep.split("/", 1)[0]
+            if any_tls and proto != "tls":
+                raise ConfigError(f"{name} {ep!r}: a TLS bus has no plain endpoint beside it; make it tls/ {off}")
+            if proto not in ("tcp", "tls"):
+                raise ConfigError(f"{name} {ep!r}: a secure bus is tcp/ on loopback or tls/ {off}")
+            if proto == "tcp" and not is_loopback(ep):
+                raise ConfigError(f"{name} {ep!r}: off this machine the bus needs mutual TLS (a tls/ endpoint and "
+                                  f"bus.transport.link.tls with enable_mtls = true; docs/bus.md, Security) {off}")
+        if any_tls:
+            missing = [k for k in ("root_ca_certificate", "enable_mtls") if not tls.get(k)]
+            if missing:
+                raise ConfigError(f"bus.transport.link.tls: a TLS bus needs client certificates: set "
+                                  f"{' and '.join(missing)} (docs/bus.md, Security) {off}")
+
+
+def is_loopback(endpoint: str) -> bool:
+    """Whether a locator's host is this machine only (127.0.0.0/8, ::1, localhost)."""
+    address = endpoint.split("/", 1)[-1].split("#", 1)[0].split("?", 1)[0]
+    host = address.rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def zenoh_config(cfg: BusConfig, *, listen: list[str], connect: list[str]) -> zenoh.Config:
