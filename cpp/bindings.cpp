@@ -66,9 +66,18 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("clamp_max", &SensorModel::clamp_max)
       .def_readwrite("occupied_threshold", &SensorModel::occupied_threshold);
 
+  py::register_exception<MapFileError>(m, "_MapFileError", PyExc_ValueError);
+
   py::class_<VoxelMap>(m, "_VoxelMap")
       .def(py::init<double, const SensorModel&>())
-      .def_static("load", &VoxelMap::load, py::call_guard<py::gil_scoped_release>())
+      .def_static("parse",
+                  [](py::buffer data, const SensorModel& model) {
+                    const py::buffer_info info = data.request();
+                    if (info.ndim != 1 || info.itemsize != 1 || info.strides[0] != 1)
+                      throw std::invalid_argument("data: expected contiguous bytes");
+                    py::gil_scoped_release release;
+                    return VoxelMap::parse(static_cast<const char*>(info.ptr), info.size, model);
+                  })
       .def_property_readonly("resolution", &VoxelMap::resolution)
       .def("insert",
            [](VoxelMap& map, const Eigen::Ref<const Points>& points, const Eigen::Ref<const Colors>& colors,
@@ -106,8 +115,15 @@ PYBIND11_MODULE(_core, m) {
                                    toArray(std::move(s.color), {n, 3}), toArray(std::move(s.last_seen), {n}),
                                    toArray(std::move(s.min_distance), {n}));
            })
-      .def("save", &VoxelMap::save, py::call_guard<py::gil_scoped_release>())
-      .def("export_bt", &VoxelMap::exportBt, py::call_guard<py::gil_scoped_release>())
+      .def("serialize",
+           [](const VoxelMap& map, bool bt) {
+             std::string stream;
+             {
+               py::gil_scoped_release release;
+               stream = map.serialize(bt ? FileFormat::Bt : FileFormat::Ot);
+             }
+             return py::bytes(stream);
+           })
       .def("stats", [](const VoxelMap& map) {
         MapStats s;
         {

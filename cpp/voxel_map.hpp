@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <octomap/OcTree.h>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,14 @@ struct VoxelSet {
   size_t size() const { return occupancy.size(); }
 };
 
+// A map stream that is not one complete, well-formed OctoMap file; the message says what is wrong
+// and at which byte, so a damaged file is reported, never half-loaded.
+struct MapFileError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+enum class FileFormat { Ot, Bt };
+
 struct MapStats {
   double resolution;
   size_t nodes, leaves, tree_bytes, column_index_bytes, node_bytes;
@@ -81,9 +90,12 @@ class VoxelMap {
                                          double max_range) const;
   VoxelSet voxels(const Eigen::Vector3d& box_min, const Eigen::Vector3d& box_max, double min_occupancy) const;
 
-  void save(const std::string& path) const;      // .ot, every attribute
-  void exportBt(const std::string& path) const;  // .bt, occupancy only
-  static std::unique_ptr<VoxelMap> load(const std::string& path, const SensorModel& model);
+  // File I/O (voxel_map_io.cpp) works on whole streams in memory; Python writes and reads the files
+  // (atomically, with an integrity footer). Ot: every attribute; Bt: occupancy, stock OcTree header.
+  std::string serialize(FileFormat format) const;
+  // Validates the whole stream (header, every node, exact end) before it builds anything; a stream
+  // that fails throws MapFileError. Reads layerpilot's tree, stock OcTree/ColorOcTree .ot and .bt.
+  static std::unique_ptr<VoxelMap> parse(const char* data, size_t size, const SensorModel& model);
 
   MapStats stats() const;
   double resolution() const { return tree_.getResolution(); }

@@ -11,6 +11,7 @@ import numpy as np
 from layerpilot import _core
 from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
+from layerpilot.map.files import MapFileError, read_checked, write_atomic
 
 KEY_OFFSET = 32768  # OctoMap's key of the cell whose lower corner is the map origin
 _NO_COLORS = np.zeros((0, 3), np.uint8)
@@ -153,35 +154,58 @@ class VoxelMap:
         thr = self.model.occupied_threshold + 1e-6 if min_occupancy is None else float(min_occupancy)
         return Voxels(*self._core.voxels(lo, hi, thr))
 
-    def save(self, path: str | os.PathLike) -> None:
-        """Write an OctoMap ``.ot`` file with every attribute (atomically: temp file + rename)."""
+    def to_bytes(self, suffix: str = ".ot") -> bytes:
+        """The map as one OctoMap file stream: ``.ot`` with every attribute, ``.bt`` occupancy only.
+
+        This is what ``save``/``export_bt`` write before the integrity footer; the snapshot store
+        writes it too.
+        """
+        if suffix not in (".ot", ".bt"):
+            raise ValueError(f"suffix: expected .ot or .bt, got {suffix!r}")
+        return self._core.serialize(suffix == ".bt")
+
+    def save(self, path: str | os.PathLike) -> int:
+        """Write an OctoMap ``.ot`` file with every attribute; returns its size in bytes.
+
+        Atomic (a uniquely named, fsynced temporary file renamed into place) and ending in an
+        integrity footer that ``load`` checks and OctoMap's tools ignore.
+        """
         path = Path(path)
         if path.suffix != ".ot":
             raise ValueError(f"path: save() writes .ot files, got {path.name}; use export_bt for .bt")
-        tmp = path.with_name(path.name + ".tmp.ot")
-        self._core.save(str(tmp))
-        os.replace(tmp, path)
+        return write_atomic(path, self.to_bytes(".ot"))
 
-    def export_bt(self, path: str | os.PathLike) -> None:
-        """Write a plain OctoMap ``.bt`` (occupancy only), readable by every OctoMap tool."""
+    def export_bt(self, path: str | os.PathLike) -> int:
+        """Write a plain OctoMap ``.bt`` (occupancy only), readable by every OctoMap tool; returns its size.
+
+        Atomic and with the integrity footer, as ``save``.
+        """
         path = Path(path)
         if path.suffix != ".bt":
             raise ValueError(f"path: export_bt() writes .bt files, got {path.name}")
-        tmp = path.with_name(path.name + ".tmp.bt")
-        self._core.export_bt(str(tmp))
-        os.replace(tmp, path)
+        return write_atomic(path, self.to_bytes(".bt"))
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, model: SensorModel | None = None) -> "VoxelMap":
-        """Read a ``.ot`` (layerpilot's, or stock OcTree/ColorOcTree) or ``.bt`` file."""
+        """Read a ``.ot`` (layerpilot's, or stock OcTree/ColorOcTree) or ``.bt`` file, all of it or nothing.
+
+        The integrity footer of a layerpilot file is checked, and every file's whole stream is
+        validated (header, every node, the exact end) before the map is built: a truncated,
+        garbled or padded file raises MapFileError (a ValueError) with one line naming the file
+        and what is wrong.
+        """
         path = Path(path)
         if path.suffix not in (".ot", ".bt"):
             raise ValueError(f"path: expected a .ot or .bt file, got {path.name}")
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such map file")
+        stream = read_checked(path)
         self = cls.__new__(cls)
         self.model = model or SensorModel()
-        self._core = _core._VoxelMap.load(str(path), self.model.to_core())
+        try:
+            self._core = _core._VoxelMap.parse(stream, self.model.to_core())
+        except _core._MapFileError as exc:
+            raise MapFileError(f"{path}: {exc}") from None
         return self
 
     def stats(self) -> dict:
