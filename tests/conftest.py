@@ -33,10 +33,11 @@ def wait_for(cond, what: str, timeout: float = 20.0) -> None:
         time.sleep(0.02)
 
 
-def start_up(mission: Path, endpoint: str, log_dir: Path) -> tuple[subprocess.Popen, list[str]]:
-    """`layerpilot up` as a child process (its own process group) and the list its output lines go to."""
+def start_up(mission: Path, endpoint: str, log_dir: Path, *extra: str) -> tuple[subprocess.Popen, list[str]]:
+    """`layerpilot up` (with ``extra`` options) as a child process in its own process group, and the list
+    its output lines go to."""
     up = subprocess.Popen([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(mission),
-                           "--endpoint", endpoint, "--status-every", "1", "--log-dir", str(log_dir)],
+                           "--endpoint", endpoint, "--status-every", "1", "--log-dir", str(log_dir), *extra],
                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     lines: list[str] = []
     threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()

@@ -97,3 +97,14 @@ def test_weight_schedule_switches_on_coverage() -> None:
 def test_bad_arrival_radius_is_refused_by_name(radius) -> None:
     with pytest.raises(ValueError, match="decide.arrival_radius"):
         PilotConfig(arrival_radius=radius)
+
+
+def test_a_drone_without_priority_chooses_again_when_another_takes_its_target() -> None:
+    pilot = Pilot(PilotConfig(), behavior_from_dict(fringe_behavior()))
+    cols = ground_columns(20, 1.0)
+    first = pilot.step((0.0, 0.0, 50.0), 1.0, cols)
+    near = (first.position[0] + 3.0, first.position[1])
+    assert pilot.step((0.0, 0.0, 50.0), 1.5, cols, avoid=[near]) is None  # no priority: nothing to do
+    again = pilot.step((0.0, 0.0, 50.0), 2.0, cols, avoid=[near], yield_to=[near])
+    assert again is not None and again.reason == "conflict"
+    assert np.hypot(again.position[0] - near[0], again.position[1] - near[1]) >= pilot.behavior.r_e

@@ -151,3 +151,22 @@ def test_bench_bus_runs_small():
     r = run(seconds=0.3, rate=10.0, width=32, height=24, queries=3, window=64)
     assert r["clouds_sent"] == 3 and r["clouds_inserted"] + r["clouds_dropped"] == 3
     assert r["layer_set_bytes"] > 0 and r["layer_query_ms_median"] > 0
+
+
+def test_every_query_gets_an_answer(bus):
+    """Selectors that match several services or none, and windows off the map, get replies (errors say why)."""
+    server_session, client = bus
+    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=1.0, snapshot="")))
+    server.start()
+    try:
+        time.sleep(0.3)
+        for x in ("1e300", "1e19", "9.3e18"):
+            replies = list(client.get(K.service("layers") + f"?x={x}", timeout=10.0))
+            assert len(replies) == 1 and replies[0].err is not None
+            assert "x:" in replies[0].err.payload.to_bytes().decode()
+        replies = list(client.get("layerpilot/uav1/map/*", timeout=10.0))
+        assert len(replies) >= 1  # one per service that answered; save says it has no snapshot path
+        assert any(r.ok is not None for r in replies)
+        assert server.rejects.total >= 3
+    finally:
+        server.stop()

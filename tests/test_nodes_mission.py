@@ -59,14 +59,14 @@ snapshot_period = 2.0
         poses: list[msg.State] = []
         pose_walls: list[float] = []  # when each pose arrived (wall clock)
         waypoints2: list[msg.Waypoint] = []
-        arrivals: list[msg.Waypoint] = []  # both drones' waypoints in the order they were heard
+        arrivals: list[tuple[float, msg.Waypoint]] = []  # both drones' waypoints as heard (wall time, waypoint)
         lock = threading.Lock()
 
         def on_waypoint(into: list, sample) -> None:
             w = msg.decode_waypoint(sample.payload.to_bytes())
             with lock:
                 into.append(w)
-                arrivals.append(w)
+                arrivals.append((time.monotonic(), w))
         subs = [
             client.declare_subscriber(K.layers, lambda s: layer_stamps.append(decode_layer_set(s.payload.to_bytes()).stamp)),
             client.declare_subscriber(K.waypoint, lambda s: on_waypoint(waypoints, s)),
@@ -125,15 +125,20 @@ snapshot_period = 2.0
 
         # the second drone flew too, into the same map, never towards the first one's current target
         assert len({w.seq for w in waypoints2}) >= 3
+        # Two drones may decide at the same moment, before hearing each other: then the one without
+        # priority (uav2, listed second) chooses again as soon as it hears uav1's target.
         target1, checked, seen2 = None, 0, set()
-        for w in arrivals:
+        for i, (t, w) in enumerate(arrivals):
             if w.vehicle == "uav1":
                 target1 = w
             elif w.seq not in seen2:  # a fresh decision of uav2 (repeats are the same target)
                 seen2.add(w.seq)
-                if target1 is not None:
-                    assert np.hypot(*(w.position[:2] - target1.position[:2])) >= 10.0 - 1e-6  # r_e of balanced
-                    checked += 1
+                if target1 is None:
+                    continue
+                checked += 1
+                if np.hypot(*(w.position[:2] - target1.position[:2])) < 10.0 - 1e-6:  # r_e of balanced
+                    later = [(t2, w2) for t2, w2 in arrivals[i + 1:] if w2.seq != w.seq or w2.vehicle == "uav1"]
+                    assert later and later[0][0] - t < 3.0, "uav2 kept a target within r_e of uav1's"
         assert checked >= 2
         for s in subs:
             s.undeclare()

@@ -43,7 +43,9 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         window: int = 512, resolution: float = 0.5) -> dict:
     ep = free_endpoint()
     server_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
-    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=resolution, snapshot="", layers_rate=0.01)))
+    mission = Mission(vehicles=[K.vehicle], map_server=MapServiceConfig(resolution=resolution, snapshot="",
+                                                                        layers_rate=0.01))
+    server = MapServer(server_session, mission)
     server.start()
     rng = np.random.default_rng(0)
     try:
@@ -53,7 +55,7 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         for i, c in enumerate(clouds):  # paced like a camera
             time.sleep(max(0.0, start + i / rate - time.perf_counter()))
             client.put(K.cloud, c)
-        while server.service.clouds_inserted + server.queue.dropped < len(clouds):
+        while server.service.clouds_inserted + server.queue.dropped + server.rejects.total < len(clouds):
             time.sleep(0.005)
         elapsed = time.perf_counter() - start
         inserted, dropped = server.service.clouds_inserted, server.queue.dropped

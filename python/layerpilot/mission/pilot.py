@@ -63,7 +63,7 @@ class Command:
     yaw: float
     speed: float
     decision: Decision | None  # None for a scripted pattern
-    reason: str  # "start", "reached", "retarget"
+    reason: str  # "start", "reached", "retarget", "conflict" (a drone with priority took our target)
 
     def record(self) -> dict[str, Any]:
         """One JSON-ready line for decisions.jsonl (the same in every driver)."""
@@ -113,10 +113,12 @@ class Pilot:
         return math.hypot(position[0] - self.target[0], position[1] - self.target[1]) <= self.cfg.arrival_radius
 
     def step(self, position: Sequence[float], time: float, columns: ColumnLayers | None,
-             avoid: Sequence[Sequence[float]] = ()) -> Command | None:
+             avoid: Sequence[Sequence[float]] = (), yield_to: Sequence[Sequence[float]] = ()) -> Command | None:
         """A new command when one is due, else None. ``columns``: the newest column layers (None: none yet).
 
         ``avoid``: other drones' current targets (x, y); the maker keeps r_e away from them.
+        ``yield_to``: those of drones with priority: when one of them chose a target within
+        r_e of ours (both decided before hearing each other), we choose again.
         A retargeting behavior is reconsidered once per new ``columns`` object while flying.
         """
         reason = None
@@ -125,6 +127,8 @@ class Pilot:
         elif self.arrived(position):
             self.reached += 1
             reason = "reached"
+        elif self.maker is not None and self._conflicts(yield_to):
+            reason = "conflict"
         if reason is not None:
             if self.pattern is not None:
                 return self._from_pattern(time, reason)
@@ -140,6 +144,9 @@ class Pilot:
         self.evaluations += 1
         decision = self.maker.reconsider(self._layers(columns, position, time), position, time, avoid=avoid)
         return None if decision is None else self._from_decision(decision, position, time, "retarget")
+
+    def _conflicts(self, points: Sequence[Sequence[float]]) -> bool:
+        return any(math.hypot(p[0] - self.target[0], p[1] - self.target[1]) < self.behavior.r_e for p in points)
 
     def _layers(self, columns: ColumnLayers, position: Sequence[float], time: float):
         context = LayerContext(now=time, home=self.cfg.home, position=tuple(float(v) for v in position[:3]),

@@ -109,9 +109,15 @@ class DecideNode:
             self._cond.notify()
 
     def _on_other(self, d: Decision, key: str) -> None:
-        if d.vehicle != self.keys.vehicle:
+        vehicle = keys.vehicle_of(key)
+        if vehicle not in self.mission.vehicles or d.vehicle != vehicle:  # state only for the mission's vehicles
+            raise BadMessage("unknown vehicle", f"decision of {d.vehicle!r} on {key}: not one of the mission's "
+                                                f"other vehicles {self.mission.vehicles}")
+        if vehicle != self.keys.vehicle:
             with self._cond:
-                self._others[d.vehicle] = d.waypoint[:2].copy()
+                self._others[vehicle] = d.waypoint[:2].copy()
+                self._fresh = True  # a drone with priority may have taken our target
+                self._cond.notify()
 
     def _iteration(self) -> bool:
         """Wait for a new layer set or pose (or the repeat period), step the pilot, publish; False = stop."""
@@ -120,12 +126,14 @@ class DecideNode:
             if self._stop.is_set():
                 return False
             fresh, self._fresh = self._fresh, False
-            columns, state, avoid = self._columns, self._state, list(self._others.values())
+            columns, state = self._columns, self._state
+            avoid = list(self._others.values())
+            yield_to = [t for v, t in self._others.items() if self._has_priority(v)]
         self._repeat_waypoint()
         if not fresh or state is None:
             return True
         try:
-            command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid)
+            command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid, yield_to=yield_to)
         except INPUT_ERRORS as exc:  # e.g. the layer window misses the area of interest: wait for the next one
             self.rejects.reject(self.keys.layers, BadMessage(f"decision failed ({type(exc).__name__})", str(exc)))
             with self._cond:
@@ -135,6 +143,11 @@ class DecideNode:
         if command is not None:
             self._publish(command, state)
         return True
+
+    def _has_priority(self, vehicle: str) -> bool:
+        """Vehicles listed earlier in the mission have priority when two choose the same spot."""
+        vehicles = self.mission.vehicles
+        return vehicles.index(vehicle) < vehicles.index(self.keys.vehicle)
 
     def _repeat_waypoint(self) -> None:
         """A link that started (or restarted) late still gets its target (transport pacing: wall clock)."""

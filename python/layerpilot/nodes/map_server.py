@@ -66,7 +66,8 @@ class MapServer:
         self._decls.append(s.declare_subscriber(keys.all_vehicles("cloud"),
                                                 guarded(decode_cloud, self._enqueue, self.rejects, self.supervisor)))
         for name in keys.SERVICES:
-            self._decls.append(s.declare_queryable(f"{keys.PREFIX}/*/map/{name}", self._on_query))
+            self._decls.append(s.declare_queryable(f"{keys.PREFIX}/*/map/{name}",
+                                                   lambda q, name=name: self._on_query(q, name)))
         for iteration, name in ((self._insert_one, "insert"), (self._publish_due, "publish"),
                                 (self._snapshot_due, "snapshot")):
             self.supervisor.start(f"map-{name}", iteration)
@@ -144,24 +145,23 @@ class MapServer:
 
     # --- queries --------------------------------------------------------------------------
 
-    def _on_query(self, query: zenoh.Query) -> None:
+    def _on_query(self, query: zenoh.Query, service: str) -> None:
         # answered off Zenoh's thread so that a slow query never blocks the others
         try:
-            self._pool.submit(self._answer, query)
+            self._pool.submit(self._answer, query, service)
         except RuntimeError:  # shutting down
             query.reply_err(b"map server is stopping")
             query.drop()
 
-    def _answer(self, query: zenoh.Query) -> None:
+    def _answer(self, query: zenoh.Query, service: str) -> None:
+        """``service``: the queryable that got it (a selector like ``map/*`` reaches every one)."""
         key = str(query.key_expr)
         try:
             vehicle = keys.vehicle_of(key)
-            service = key.rsplit("/", 1)[-1]
-            handler = getattr(self, f"_query_{service}", None)
-            if handler is None or service not in keys.SERVICES:
-                raise BadMessage("bad query", f"{key}: no such map service; ask one of {', '.join(keys.SERVICES)}")
-            payload = handler(vehicle, query_params(query))
-            query.reply(query.key_expr, payload)
+            if vehicle != "*":
+                keys.check_vehicle(vehicle)
+            payload = getattr(self, f"_query_{service}")(vehicle, query_params(query))
+            query.reply(f"{keys.PREFIX}/{vehicle}/map/{service}" if vehicle != "*" else query.key_expr, payload)
             self.queries_answered += 1
         except Exception as exc:  # every query gets an answer: an error naming the problem
             error = exc if isinstance(exc, BadMessage) else BadMessage(f"bad query ({type(exc).__name__})", str(exc))
