@@ -9,9 +9,11 @@ import pytest
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys, all_vehicles, vehicle_of
-from layerpilot.bus.layerset import LayerSet, column_arrays, decode_layer_set, encode_layer_set, to_column_layers
+from layerpilot.bus.layerset import (GridLayersMessage, column_arrays, decode_layer_set, encode_layer_set,
+                                     to_column_layers)
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
+from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
 from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
 
@@ -40,30 +42,38 @@ def test_keys():
 def test_cloud_round_trip():
     pts = rng.normal(size=(1000, 3)).astype(np.float32)
     cols = rng.integers(0, 256, (1000, 3), dtype=np.uint8)
-    c = msg.decode_cloud(msg.encode_cloud(msg.Cloud(12.5, "uav1", 3, pts, np.array([1.0, 2, 3]), cols, 40.0)))
-    assert (c.stamp, c.vehicle, c.seq, c.max_range) == (12.5, "uav1", 3, 40.0)
+    m = msg.decode_cloud(msg.encode_cloud(msg.CloudMessage("uav1", 3, PointCloud(pts, [1.0, 2, 3], 12.5, cols), 40.0)))
+    c = m.cloud
+    assert (c.stamp, m.vehicle, m.seq, m.max_range) == (12.5, "uav1", 3, 40.0)
     np.testing.assert_array_equal(c.points, pts)
     np.testing.assert_array_equal(c.colors, cols)
     np.testing.assert_array_equal(c.origin, [1, 2, 3])
-    assert msg.decode_cloud(msg.encode_cloud(msg.Cloud(0, "u", 0, pts[:0], np.zeros(3)))).points.shape == (0, 3)
-    with pytest.raises(ValueError, match="points"):
-        msg.encode_cloud(msg.Cloud(0, "u", 0, pts[:, :2], np.zeros(3)))
+    empty = msg.CloudMessage("u", 0, PointCloud(pts[:0], np.zeros(3), 0.0))
+    back = msg.decode_cloud(msg.encode_cloud(empty)).cloud
+    assert back.points.shape == (0, 3) and back.colors is None
+    with pytest.raises(ValueError, match="cloud"):
+        msg.encode_cloud(msg.CloudMessage("u", 0, pts))
 
 
 def test_frame_state_waypoint_decision_mission_round_trip():
     img = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
     depth = rng.random((48, 64)).astype(np.float32)
     depth[0, 0] = np.nan  # no measurement is allowed
-    q = np.array([0.5, 0.5, 0.5, 0.5])
-    f = msg.decode_frame(msg.encode_frame(msg.Frame(1.0, "uav1", 9, img, (50, 51, 32, 24), np.array([1.0, 2, 3]), q, depth)))
+    pose = Pose(np.array([1.0, 2, 3]), np.array([0.5, 0.5, 0.5, 0.5]))
+    k = CameraIntrinsics(50, 51, 32, 24, 64, 48)
+    m = msg.decode_frame(msg.encode_frame(msg.FrameMessage("uav1", 9, CameraFrame(img, pose, k, 1.0, depth))))
+    f = m.frame
     np.testing.assert_array_equal(f.image, img)
     np.testing.assert_array_equal(f.depth, depth)
-    assert f.intrinsics == (50, 51, 32, 24) and f.seq == 9
-    np.testing.assert_allclose(f.orientation, q)
+    assert f.intrinsics == k and f.stamp == 1.0 and (m.vehicle, m.seq) == ("uav1", 9)
+    assert f.pose == pose
+    no_depth = msg.decode_frame(msg.encode_frame(msg.FrameMessage("uav1", 10, CameraFrame(img, pose, k, 1.0))))
+    assert no_depth.frame.depth is None
 
-    s = msg.decode_state(msg.encode_state(msg.State(2.0, "uav1", np.array([1.0, 2, 30]), q, np.array([0.5, 0, 0]),
-                                                    True, "GUIDED", 0.8)))
+    body = Pose.from_euler(0.1, -0.05, 2.0, (1.0, 2, 30))
+    s = msg.decode_state(msg.encode_state(msg.State(2.0, "uav1", body, np.array([0.5, 0, 0]), True, "GUIDED", 0.8)))
     assert s.armed and s.mode == "GUIDED" and s.battery == 0.8
+    assert s.pose == body
     np.testing.assert_array_equal(s.position, [1, 2, 30])
 
     w = msg.decode_waypoint(msg.encode_waypoint(msg.Waypoint(3.0, "uav1", 4, np.array([5.0, 6, 20]))))
@@ -93,7 +103,7 @@ def _columns(g: GridGeometry, smooth: bool = True) -> ColumnLayers:
 def test_layer_set_512_round_trip_under_1mb_with_bounded_error():
     g = GridGeometry(-128.0, -128.0, 0.5, 512, 512)
     cl = _columns(g)
-    data = encode_layer_set(LayerSet(100.0, "uav1", g, column_arrays(cl)))
+    data = encode_layer_set(GridLayersMessage(100.0, "uav1", g, column_arrays(cl)))
     assert len(data) < 1_000_000
     back = to_column_layers(decode_layer_set(data))
     assert back.geometry == g
@@ -110,17 +120,17 @@ def test_layer_set_512_round_trip_under_1mb_with_bounded_error():
 def test_layer_set_falls_back_to_uint8_then_refuses():
     g = GridGeometry(0.0, 0.0, 1.0, 512, 512)
     noise = {"a": rng.random((512, 512)).astype(np.float32) * 100, "b": rng.random((512, 512)).astype(np.float32)}
-    data = encode_layer_set(LayerSet(0.0, "uav1", g, noise), {"a": "float16", "b": "float16"})
+    data = encode_layer_set(GridLayersMessage(0.0, "uav1", g, noise), {"a": "float16", "b": "float16"})
     assert len(data) < 1_000_000
     back = decode_layer_set(data)
     assert np.abs(back.layers["a"] - noise["a"]).max() <= 100 / 252 / 2 + 1e-3  # uint8: 252 levels
     with pytest.raises(ValueError, match="max_bytes"):
         colors = {n: rng.integers(0, 256, (512, 512, 3), dtype=np.uint8) for n in ("c", "d")}  # 1.5 MB of noise
-        encode_layer_set(LayerSet(0.0, "uav1", g, colors))
+        encode_layer_set(GridLayersMessage(0.0, "uav1", g, colors))
 
 
 def test_decode_rejects_with_reason():
-    good = msg.encode_cloud(msg.Cloud(0.0, "uav1", 0, np.zeros((10, 3), np.float32), np.zeros(3)))
+    good = msg.encode_cloud(msg.CloudMessage("uav1", 0, PointCloud(np.zeros((10, 3), np.float32), np.zeros(3), 0.0)))
     with pytest.raises(BadMessage, match="not protobuf"):
         msg.decode_cloud(good[: len(good) // 2])
     m = pb.PointCloud()
@@ -136,12 +146,20 @@ def test_decode_rejects_with_reason():
         msg.decode_cloud(b"")
 
 
-def test_quaternion_matrix_round_trip():
-    from layerpilot.sim.camera import camera_pose
-
-    for yaw in np.linspace(-3, 3, 13):
-        for pitch in (-90.0, 0.0, 30.0, 60.0, 90.0):
-            R = camera_pose((0.0, 0.0, 0.0), yaw, pitch).rotation
-            q = msg.quat_from_matrix(R)
-            assert q[0] >= 0 and abs(np.linalg.norm(q) - 1) < 1e-12
-            np.testing.assert_allclose(msg.matrix_from_quat(q), R, atol=1e-12)
+def test_frame_and_state_decoders_reject_bad_poses_and_intrinsics():
+    img = np.zeros((4, 6, 3), np.uint8)
+    good = msg.encode_frame(msg.FrameMessage("uav1", 1, CameraFrame(img, Pose(), CameraIntrinsics(5, 5, 2, 2, 6, 4), 0.0)))
+    m = pb.CameraFrame()
+    m.ParseFromString(good)
+    m.pose.orientation.w = 2.0  # not a unit quaternion
+    with pytest.raises(BadMessage, match="orientation"):
+        msg.decode_frame(m.SerializeToString())
+    m.ParseFromString(good)
+    m.intrinsics.fx = 0.0
+    with pytest.raises(BadMessage, match="fx"):
+        msg.decode_frame(m.SerializeToString())
+    s = pb.VehicleState()
+    s.ParseFromString(msg.encode_state(msg.State(0.0, "uav1", Pose())))
+    s.pose.position.x = float("nan")
+    with pytest.raises(BadMessage, match="position"):
+        msg.decode_state(s.SerializeToString())

@@ -8,7 +8,7 @@ import pytest
 from layerpilot.depth import GroundTruthDepth, StereoDepth
 from layerpilot.depth.config import preset_for
 from layerpilot.depth.evaluate import score
-from layerpilot.depth.simulated import sideways_flight, terrain_scene_depth
+from layerpilot.eval.fixtures import sideways_flight, terrain_scene_depth
 from layerpilot.map import VoxelMap
 from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
 
@@ -33,7 +33,7 @@ def test_rendered_flight_precision_and_coverage(world, size, altitude, pitch):
         s = score(cloud, frame, scale=config.match.scale)
         rel.append(s.rel_errors)
         coverage.append(s.coverage)
-        np.testing.assert_array_equal(cloud.origin, frame.center)
+        np.testing.assert_array_equal(cloud.origin, frame.pose.position)
         assert cloud.stamp == frame.stamp
     stats = source.stats()
     assert stats["pairs"] >= 4 and stats["skipped_no_history"] == 1

@@ -6,16 +6,18 @@ import cv2
 import numpy as np
 import pytest
 
-from layerpilot.depth import Frame, FramePicker, PickConfig
-from layerpilot.depth.synthetic import intrinsics, look_pose, noise_texture
+from layerpilot.depth import FramePicker, PickConfig
+from layerpilot.eval.fixtures import noise_texture
+from layerpilot.geometry import CameraFrame, CameraIntrinsics
+from layerpilot.sim.camera import camera_pose
 
-K = intrinsics(160, 120)
+K = CameraIntrinsics.from_fov(160, 120, 60.0)
 IMAGE = cv2.resize(noise_texture(256, seed=1), (160, 120), interpolation=cv2.INTER_AREA)
 BLURRY = cv2.GaussianBlur(IMAGE, (0, 0), 6)
 
 
-def frame(x=0.0, y=0.0, z=40.0, yaw=90.0, pitch=90.0, stamp=0.0, image=IMAGE) -> Frame:
-    return Frame(image, look_pose(np.array([x, y, z]), yaw, pitch), K, stamp)
+def frame(x=0.0, y=0.0, z=40.0, yaw=90.0, pitch=90.0, stamp=0.0, image=IMAGE) -> CameraFrame:
+    return CameraFrame(image, camera_pose(np.array([x, y, z]), np.radians(yaw), pitch), K, stamp)
 
 
 def picker(**kw) -> FramePicker:
@@ -71,7 +73,7 @@ def test_blurry_frame_is_skipped_and_never_a_partner():
     p.push(frame(x=0.0))
     assert p.push(frame(x=1.0, image=BLURRY)).reason == "blurry"
     res = p.push(frame(x=2.0))
-    assert res.reason == "ok" and res.partner.center[0] == 0.0
+    assert res.reason == "ok" and res.partner.pose.position[0] == 0.0
     assert dict(p.skipped) == {"no_history": 1, "blurry": 1} and p.pairs == 1
 
 
@@ -80,7 +82,7 @@ def test_partner_nearest_the_target_ratio_wins():
     for i, x in enumerate([0.0, 0.8, 1.6, 2.4, 3.2]):
         p.push(frame(x=x, stamp=i))
     res = p.push(frame(x=4.0, stamp=5))
-    assert res.reason == "ok" and res.partner.center[0] == pytest.approx(1.6)  # 2.4 m / 40 m = 0.06
+    assert res.reason == "ok" and res.partner.pose.position[0] == pytest.approx(1.6)  # 2.4 m / 40 m = 0.06
 
 
 def test_reason_is_from_the_candidate_that_got_furthest():
@@ -107,5 +109,6 @@ def test_config_errors_name_the_key():
 def test_partner_of_another_image_size_is_not_used():
     p = picker()
     small = cv2.resize(IMAGE, (80, 60), interpolation=cv2.INTER_AREA)
-    p.push(Frame(small, look_pose(np.array([0.0, 0.0, 40.0]), 90.0, 90.0), intrinsics(80, 60), 0.0))
+    p.push(CameraFrame(small, camera_pose(np.array([0.0, 0.0, 40.0]), np.radians(90.0), 90.0),
+                       CameraIntrinsics.from_fov(80, 60, 60.0), 0.0))
     assert p.push(frame(x=2.0)).reason == "size_mismatch"

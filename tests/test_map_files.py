@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from layerpilot.eval.fixtures import survey_clouds
 from layerpilot.map import VoxelMap, agreement
-from layerpilot.map.synthetic import survey_frames
 
 
 def run(*cmd: str | Path, cwd: Path | None = None) -> str:
@@ -27,7 +27,7 @@ def run(*cmd: str | Path, cwd: Path | None = None) -> str:
 @pytest.fixture(scope="module")
 def small_map() -> VoxelMap:
     m = VoxelMap(1.0)
-    for f in survey_frames(2, seed=9, width=120, height=90):
+    for f in survey_clouds(2, seed=9, width=120, height=90):
         m.insert(f.points, f.origin, f.colors, f.stamp)
     return m
 

@@ -7,8 +7,8 @@ import threading
 import numpy as np
 import pytest
 
+from layerpilot.eval.fixtures import survey_clouds
 from layerpilot.map import VoxelMap
-from layerpilot.map.synthetic import survey_frames
 
 
 @pytest.fixture()
@@ -50,7 +50,7 @@ def test_voxels_in_a_box(wall: VoxelMap) -> None:
 
 
 def test_readers_run_safely_while_frames_are_inserted() -> None:
-    frames = survey_frames(4, seed=2, width=200, height=150)
+    frames = survey_clouds(4, seed=2, width=200, height=150)
     m = VoxelMap(1.0)
     errors: list[BaseException] = []
     reads = [0]

@@ -11,11 +11,11 @@ import numpy as np
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
-from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.bus.session import free_endpoint
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.world import World, WorldConfig
-from conftest import SMALL_MISSION_NODES, start_up, stop_up
+from conftest import SMALL_MISSION_NODES, start_up, stop_up, operator_session
 
 K = Keys("uav1")
 
@@ -38,8 +38,8 @@ snapshot = ""
 url = "tcp:127.0.0.1:{sitl.addresses[0][1]}"
 """)
     up, lines = start_up(mission, ep, tmp_path / "logs")
-    client = open_session(BusConfig(endpoint=ep))
-    frames: list[msg.Frame] = []
+    client = operator_session(ep, tmp_path / "logs")
+    frames: list[msg.FrameMessage] = []
     waypoints: list[msg.Waypoint] = []
     layer_sets: list[bytes] = []
     subs = [client.declare_subscriber(K.camera, lambda s: frames.append(msg.decode_frame(s.payload.to_bytes()))),
@@ -67,9 +67,9 @@ url = "tcp:127.0.0.1:{sitl.addresses[0][1]}"
             w = next(w for w in waypoints if w.seq == seq)
             assert np.min(np.hypot(*(track - w.position[:2]).T)) < 3.0, seq
         # frames are stamped with the autopilot's clock and taken from where it says it is
-        last = frames[-1]
+        last = frames[-1].frame
         assert abs(last.stamp - sitl.time) < 5.0
-        assert np.hypot(*(last.position[:2] - sitl.pose().position[:2])) < 30.0
+        assert np.hypot(*(last.pose.position[:2] - sitl.pose().position[:2])) < 30.0
         # the map lives in the autopilot's frame: the world's terrain shifted by its height at home
         # (-5.7 m for the default world), never below it, and on it in the clearings
         cl = to_column_layers(decode_layer_set(layer_sets[-1]))

@@ -52,8 +52,8 @@ def test_rendered_depth_matches_independent_ray_cast(world, renderer, position, 
     rng = np.random.default_rng(0)
     u = rng.integers(0, 640, 300)
     v = rng.integers(0, 480, 300)
-    dirs = pixel_rays(frame.K, pose, u, v)
-    dist = _ray_cast(world, pose.centre, dirs)
+    dirs = pixel_rays(frame.intrinsics, pose, u, v)
+    dist = _ray_cast(world, pose.position, dirs)
     zdepth = dist * (dirs @ pose.rotation[:, 2])
     got = frame.depth[v, u].astype(np.float64)
     assert np.array_equal(np.isinf(got), np.isinf(zdepth))
@@ -68,15 +68,15 @@ def test_sky_is_inf_and_has_sky_colour(renderer):
     sky = np.isinf(frame.depth)
     assert sky[:100].all()  # the top rows see only sky
     assert (~sky).sum() > 1000  # the hills and trees ahead are below the horizon
-    assert np.all(frame.color[sky] == np.array([160, 196, 235], np.uint8))
+    assert np.all(frame.image[sky] == np.array([160, 196, 235], np.uint8))
 
 
 def test_colour_image_is_textured_not_flat(renderer, world):
     frame = renderer.render_vehicle((0.0, 0.0, float(world.terrain_height(0, 0)) + 30.0), 0.0)
-    assert frame.color.shape == (480, 640, 3) and frame.color.dtype == np.uint8
+    assert frame.image.shape == (480, 640, 3) and frame.image.dtype == np.uint8
     assert frame.depth.shape == (480, 640) and frame.depth.dtype == np.float32
     assert np.isfinite(frame.depth).all()
-    gray = frame.color.astype(np.float64).mean(axis=2)
+    gray = frame.image.astype(np.float64).mean(axis=2)
     # high-frequency texture: neighbouring pixels differ, and every 16x16 block has variance
     assert np.mean(np.abs(np.diff(gray, axis=1))) > 2.0
     blocks = gray.reshape(30, 16, 40, 16).std(axis=(1, 3))
@@ -85,7 +85,7 @@ def test_colour_image_is_textured_not_flat(renderer, world):
 
 def test_camera_pose_math():
     cam = CameraConfig()
-    K = cam.K
+    K = cam.intrinsics.K
     assert K[0, 0] == pytest.approx(320.0) and K[1, 1] == pytest.approx(320.0)  # 90 deg HFOV at 640 px
     assert (K[0, 2], K[1, 2]) == (319.5, 239.5)
     pose = camera_pose((1.0, 2.0, 30.0), math.pi / 2, 60.0)  # yaw north
@@ -97,12 +97,12 @@ def test_camera_pose_math():
     assert np.allclose(R[:, 1], [0.0, -math.sqrt(3) / 2, -0.5], atol=1e-12)
     # the ground point the optical axis hits is 30/tan(60) m north, at the principal point
     target = np.array([1.0, 2.0 + 30.0 / math.tan(math.radians(60)), 0.0])
-    pc = pose.to_camera(target[None])[0]
+    pc = pose.to_local(target[None])[0]
     uv = K @ pc / pc[2]
     assert np.allclose(uv[:2], [319.5, 239.5])
     assert pc[2] == pytest.approx(30.0 / math.sin(math.radians(60)))
     # a point east of the target appears right of centre
-    pe = pose.to_camera((target + [5.0, 0, 0])[None])[0]
+    pe = pose.to_local((target + [5.0, 0, 0])[None])[0]
     assert (K @ pe / pe[2])[0] > 319.5
     with pytest.raises(ValueError, match="position"):
         camera_pose((0.0, 0.0), 0.0)
@@ -110,4 +110,10 @@ def test_camera_pose_math():
 
 def test_render_rejects_bad_pose(renderer):
     with pytest.raises(ValueError, match="pose"):
-        renderer.render(type("P", (), {"rotation": np.eye(2), "centre": np.zeros(3)})())
+        renderer.render(np.eye(4))
+
+
+def test_rendered_frame_is_stamped_with_pose_and_intrinsics(renderer):
+    pose = camera_pose((0.0, 0.0, 40.0), 0.3, 60.0)
+    frame = renderer.render(pose, stamp=12.5)
+    assert frame.stamp == 12.5 and frame.pose == pose and frame.intrinsics == CameraConfig().intrinsics

@@ -67,11 +67,12 @@ def test_take_off_over_mavlink_and_render_from_the_vehicle_pose(sim):
 
     # the last frame is taken from the vehicle's pose, 30 m above home
     stamp, frame = frames[-1]
+    assert frame.stamp == stamp
     pos = s.vehicle.position
     assert pos[2] == pytest.approx(ground + 30.0, abs=0.5)
-    expected = camera_pose(frame.pose.centre, s.vehicle.yaw, 60.0)
+    expected = camera_pose(frame.pose.position, s.vehicle.yaw, 60.0)
     assert np.allclose(frame.pose.rotation, expected.rotation, atol=1e-3)
-    assert np.linalg.norm(frame.pose.centre - pos) < 0.1  # at most one step of climb apart
+    assert np.linalg.norm(frame.pose.position - pos) < 0.1  # at most one step of climb apart
 
     # every pixel's depth puts its 3D point on the world surface (between terrain and canopy top)
     K = frame.K
@@ -79,7 +80,7 @@ def test_take_off_over_mavlink_and_render_from_the_vehicle_pose(sim):
     d = frame.depth[v, u]
     assert np.isfinite(d).all()
     pc = np.stack([u, v, np.ones_like(u)], axis=-1).reshape(-1, 3) @ np.linalg.inv(K).T * d.reshape(-1, 1)
-    pts = frame.pose.centre + pc @ frame.pose.rotation.T
+    pts = frame.pose.position + pc @ frame.pose.rotation.T
     terrain = s.world.terrain_height(pts[:, 0], pts[:, 1])
     assert np.all(pts[:, 2] >= terrain - 0.01)
     for x, y, z in pts[::8]:  # the exact column top under the point (a one-cell grid centred on it)

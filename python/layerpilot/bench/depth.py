@@ -17,8 +17,8 @@ import numpy as np
 from layerpilot.depth.config import DepthConfig, preset_for
 from layerpilot.depth.evaluate import score
 from layerpilot.depth.picking import FramePicker
-from layerpilot.depth.simulated import BENCH_PAIRS, render_pair, terrain_scene_depth
 from layerpilot.depth.stereo import StereoMatcher
+from layerpilot.eval.fixtures import BENCH_PAIRS, render_pair, terrain_scene_depth
 
 
 def run_size(world, width: int, height: int, repeats: int) -> dict:

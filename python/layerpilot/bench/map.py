@@ -18,26 +18,6 @@ def _ms(f) -> float:
     return 1000 * (time.perf_counter() - t0)
 
 
-def simulator_clouds(count: int, seed: int) -> list:
-    """Ground-truth depth clouds from the simulator's camera (640x480, 90 deg, pitched 60 deg down)
-    along a survey leg 40-60 m above the default forest, 15 m between frames."""
-    from layerpilot.depth.simulated import to_frame
-    from layerpilot.depth.source import GroundTruthDepth
-    from layerpilot.sim import Renderer, World, WorldConfig, camera_pose
-
-    world = World(WorldConfig(seed=seed))
-    source = GroundTruthDepth(max_depth=np.inf)  # keep far points: the map applies its max range
-    rng = np.random.default_rng(seed)
-    clouds = []
-    with Renderer(world) as renderer:
-        for k in range(count):
-            x, y = -100.0 + 15.0 * k, float(rng.uniform(-20, 20))
-            z = float(world.terrain_height(x, y)) + rng.uniform(40, 60)
-            rendered = renderer.render(camera_pose((x, y, z), float(rng.uniform(-0.3, 0.3)), 60.0))
-            clouds.append(source.push(to_frame(rendered, float(k))))
-    return clouds
-
-
 def run_map_bench(frames: list, resolution: float = 1.0, max_range: float = 100.0) -> dict:
     """Insert ``frames`` with layerpilot and with OctoMap (discretized and default), each into a
     map of its own, and compare mean milliseconds per frame over the same frames."""
@@ -101,4 +81,6 @@ def print_map_bench(result: dict) -> None:
 def main(frames: int, seed: int) -> None:
     print(f"rendering {frames} simulator frames (640x480, 40-60 m above the forest, pitched 60 deg down)...",
           flush=True)
-    print_map_bench(run_map_bench(simulator_clouds(frames, seed)))
+    from layerpilot.eval.fixtures import survey_clouds  # 640x480 ground-truth depth, far points kept
+
+    print_map_bench(run_map_bench(survey_clouds(frames, seed)))

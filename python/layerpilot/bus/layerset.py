@@ -1,4 +1,7 @@
-"""Layer sets on the bus: a grid geometry plus named 2D layers in a compact encoding.
+"""Grid layers on the bus (proto ``LayerSet``): a grid geometry plus named 2D layers in a compact encoding.
+
+``GridLayersMessage`` is the wire form (what the map server publishes: its column layers, or any
+named arrays); the decision maker's feature layers are ``layerpilot.layers.LayerSet``.
 
 Floats travel as float16 or as uint8/uint16 with scale and offset (the top three codes
 mean -inf, +inf and NaN), booleans as packed bits, colors raw; everything zlib'd. If a set
@@ -13,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from layerpilot.bus import arrays
+from layerpilot.bus import arrays, limits
 from layerpilot.bus.keys import check_vehicle
 from layerpilot.bus.messages import _finite, _vehicle, parse
 from layerpilot.bus.proto_gen import messages_pb2 as pb
@@ -31,7 +34,9 @@ COLUMN_ENCODINGS = {"observed": "bits", "elevation": "float16", "color": "raw",
 
 
 @dataclass(frozen=True)
-class LayerSet:
+class GridLayersMessage:
+    """``layerpilot/<vehicle>/layers`` and the ``map/layers`` reply: named arrays on one grid."""
+
     stamp: float
     vehicle: str
     geometry: GridGeometry
@@ -86,7 +91,8 @@ def encode_layer(m: pb.Layer, name: str, arr: np.ndarray, encoding: str) -> None
         _quantize(m, arr, enc)
 
 
-def encode_layer_set(ls: LayerSet, encodings: dict[str, str] | None = None, *, max_bytes: int = MAX_BYTES) -> bytes:
+def encode_layer_set(ls: GridLayersMessage, encodings: dict[str, str] | None = None, *,
+                     max_bytes: int = MAX_BYTES) -> bytes:
     """Serialize ``ls``; ``encodings`` overrides the per-layer default (COLUMN_ENCODINGS, else raw)."""
     g = ls.geometry
     chosen = {n: (encodings or {}).get(n, COLUMN_ENCODINGS.get(n, "raw")) for n in ls.layers}
@@ -113,21 +119,22 @@ def decode_layer(m: pb.Layer, shape: tuple[int, int]) -> np.ndarray:
         if dims[:2] != shape:
             raise BadMessage("bad shape", f"{where}: shape {dims} does not match the grid {shape}")
         count = int(np.prod(dims, dtype=np.int64))
-        if count > arrays.MAX_ITEMS:
-            raise BadMessage("bad shape", f"{where}: {count} cells is more than the limit")
+        if count > limits.MAX_LAYER_CELLS * 4:
+            raise BadMessage("too large", f"{where}: {count} cells is more than the limit")
         packed_msg = pb.Array()
         packed_msg.CopyFrom(m.data)
         packed_msg.shape[:] = [(count + 7) // 8]
         packed = arrays.from_proto(packed_msg, where, dtype="uint8")
         return np.unpackbits(packed, count=count).astype(bool).reshape(dims)
+    most = shape[0] * shape[1] * 4  # a grid's cells, up to 4 channels (color has 3)
     if m.encoding == pb.Layer.RAW:
-        arr = arrays.from_proto(m.data, where)
+        arr = arrays.from_proto(m.data, where, max_items=most)
     elif m.encoding == pb.Layer.FLOAT16:
-        arr = arrays.from_proto(m.data, where, dtype="float16")
+        arr = arrays.from_proto(m.data, where, dtype="float16", max_items=most)
         arr = arr.astype(m.dtype if m.dtype in ("float32", "float64") else np.float32)
     elif m.encoding in _QUANT:
         qt = _QUANT[m.encoding]
-        q = arrays.from_proto(m.data, where, dtype=np.dtype(qt).name)
+        q = arrays.from_proto(m.data, where, dtype=np.dtype(qt).name, max_items=most)
         if not (math.isfinite(m.scale) and math.isfinite(m.offset)):
             raise BadMessage("not finite", f"{where}: scale/offset")
         top = int(np.iinfo(qt).max)
@@ -143,9 +150,19 @@ def decode_layer(m: pb.Layer, shape: tuple[int, int]) -> np.ndarray:
     return arr
 
 
-def decode_layer_set(payload: bytes) -> LayerSet:
+def decode_layer_set(payload: bytes) -> GridLayersMessage:
     m = parse(pb.LayerSet, payload)
     g = m.grid
+    if g.width * g.height > limits.MAX_LAYER_CELLS:
+        raise BadMessage("too large", f"grid: {g.width}x{g.height} cells is more than {limits.MAX_LAYER_CELLS}")
+    if len(m.layers) > limits.MAX_LAYERS:
+        raise BadMessage("too large", f"layers: {len(m.layers)} is more than {limits.MAX_LAYERS}")
+    if not limits.MIN_RESOLUTION <= g.resolution <= limits.MAX_RESOLUTION:
+        raise BadMessage("bad grid", f"grid.resolution: {g.resolution} m is outside "
+                                     f"[{limits.MIN_RESOLUTION}, {limits.MAX_RESOLUTION}]")
+    for name in ("origin_x", "origin_y"):
+        if not abs(getattr(g, name)) <= limits.MAX_COORDINATE:
+            raise BadMessage("bad grid", f"grid.{name}: {getattr(g, name)} is not within ±{limits.MAX_COORDINATE:g} m")
     try:
         geometry = GridGeometry(_finite(g.origin_x, "grid.origin_x"), _finite(g.origin_y, "grid.origin_y"),
                                 _finite(g.resolution, "grid.resolution"), g.width, g.height)
@@ -153,17 +170,15 @@ def decode_layer_set(payload: bytes) -> LayerSet:
         if isinstance(exc, BadMessage):
             raise
         raise BadMessage("bad grid", str(exc)) from None
-    if g.width * g.height > arrays.MAX_ITEMS:
-        raise BadMessage("bad grid", f"{g.width}x{g.height} cells is more than the limit")
     layers: dict[str, np.ndarray] = {}
     for lm in m.layers:
         if not lm.name or lm.name in layers:
             raise BadMessage("bad layer name", f"empty or repeated layer name {lm.name!r}")
         layers[lm.name] = decode_layer(lm, geometry.shape)
-    return LayerSet(_finite(m.stamp, "stamp"), _vehicle(m), geometry, layers)
+    return GridLayersMessage(_finite(m.stamp, "stamp"), _vehicle(m), geometry, layers)
 
 
-def to_column_layers(ls: LayerSet) -> ColumnLayers:
+def to_column_layers(ls: GridLayersMessage) -> ColumnLayers:
     """Rebuild ColumnLayers from a set holding all five column arrays (as the map server publishes)."""
     missing = [n for n in COLUMN_ENCODINGS if n not in ls.layers]
     if missing:

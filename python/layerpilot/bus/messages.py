@@ -1,7 +1,9 @@
 """Codecs of every bus message: Python values <-> protobuf bytes (schemas in proto/messages.proto).
 
-``encode_*`` take numpy arrays and plain numbers and raise ValueError on bad arguments;
-``decode_*`` take untrusted bytes and raise ``BadMessage`` with a reason, never anything else.
+``encode_*`` take a message value and raise ValueError on bad arguments; ``decode_*`` take
+untrusted bytes and raise ``BadMessage`` with a reason, never anything else. Camera frames,
+point clouds and poses are the ground-floor types of ``layerpilot.geometry``; a ``*Message``
+adds the envelope the bus needs (vehicle, sequence number, ...).
 """
 
 from __future__ import annotations
@@ -12,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from google.protobuf.message import DecodeError, Message
 
-from layerpilot.bus import arrays
+from layerpilot.bus import arrays, limits
 from layerpilot.bus.keys import check_vehicle
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
-from layerpilot.grid import GridGeometry
+from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
 
 MAX_PAYLOAD = 64 << 20
 
@@ -48,8 +50,11 @@ def _finite(value: float, name: str) -> float:
 
 
 def _vec(v: pb.Vec3, name: str) -> np.ndarray:
+    """A finite 3-vector within ±MAX_COORDINATE (the map frame is local: 1e300 m is an attack, not a place)."""
     out = np.array([v.x, v.y, v.z], np.float64)
     arrays.require_finite(out, name)
+    if np.any(np.abs(out) > limits.MAX_COORDINATE):
+        raise BadMessage("out of range", f"{name}: {out.tolist()} is not within ±{limits.MAX_COORDINATE:g}")
     return out
 
 
@@ -57,129 +62,95 @@ def _set_vec(v: pb.Vec3, xyz: np.ndarray | tuple[float, float, float]) -> None:
     v.x, v.y, v.z = (float(c) for c in np.asarray(xyz, np.float64).reshape(3))
 
 
-def _quat(q: pb.Quaternion, name: str) -> np.ndarray:
-    out = np.array([q.w, q.x, q.y, q.z], np.float64)
-    arrays.require_finite(out, name)
-    with np.errstate(over="ignore"):
-        norm = float(np.linalg.norm(out))
-    if abs(norm - 1.0) > 1e-3:
-        raise BadMessage("bad quaternion", f"{name}: norm {norm:.4g}, expected 1")
-    return out
+def _set_pose(m: pb.Pose, pose: Pose) -> None:
+    if not isinstance(pose, Pose):
+        raise ValueError(f"pose: expected a layerpilot.geometry.Pose, got {type(pose).__name__}")
+    _set_vec(m.position, pose.position)
+    m.orientation.w, m.orientation.x, m.orientation.y, m.orientation.z = (float(c) for c in pose.orientation)
 
 
-def _set_quat(q: pb.Quaternion, wxyz: np.ndarray | tuple[float, ...]) -> None:
-    q.w, q.x, q.y, q.z = (float(c) for c in np.asarray(wxyz, np.float64).reshape(4))
-
-
-def quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    """(w, x, y, z) of a 3x3 rotation matrix (Shepperd's method, w >= 0)."""
-    R = np.asarray(R, np.float64)
-    t = np.trace(R)
-    if t > 0:
-        s = 2.0 * math.sqrt(t + 1.0)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-    else:
-        i = int(np.argmax(np.diag(R)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 1e-300))
-        q = [0.0, 0.0, 0.0, 0.0]
-        q[0] = (R[k, j] - R[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (R[j, i] + R[i, j]) / s
-        q[1 + k] = (R[k, i] + R[i, k]) / s
-    q = np.array(q)
-    return q if q[0] >= 0 else -q
-
-
-def matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+def _pose(m: pb.Pose, name: str) -> Pose:
+    q = np.array([m.orientation.w, m.orientation.x, m.orientation.y, m.orientation.z], np.float64)
+    arrays.require_finite(q, f"{name}.orientation")
+    try:
+        return Pose(_vec(m.position, f"{name}.position"), q)
+    except ValueError as exc:
+        raise BadMessage("bad pose", f"{name}.{exc}") from None
 
 
 # --- point clouds ---------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class Cloud:
-    stamp: float
+class CloudMessage:
+    """``layerpilot/<vehicle>/cloud``: a map-frame point cloud from ``vehicle``'s depth source."""
+
     vehicle: str
     seq: int
-    points: np.ndarray  # (n, 3) float32
-    origin: np.ndarray  # (3,) float64
-    colors: np.ndarray | None = None  # (n, 3) uint8
-    max_range: float = 0.0
+    cloud: PointCloud
+    max_range: float = 0.0  # metres the map trusts the rays to; 0 = the map server's default
 
 
-def encode_cloud(c: Cloud) -> bytes:
-    m = pb.PointCloud(stamp=float(c.stamp), vehicle=check_vehicle(c.vehicle), seq=int(c.seq),
+def encode_cloud(c: CloudMessage) -> bytes:
+    cloud = c.cloud
+    if not isinstance(cloud, PointCloud):
+        raise ValueError(f"cloud: expected a layerpilot.geometry.PointCloud, got {type(cloud).__name__}")
+    m = pb.PointCloud(stamp=cloud.stamp, vehicle=check_vehicle(c.vehicle), seq=int(c.seq),
                       max_range=float(c.max_range))
-    pts = np.asarray(c.points)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points: expected shape (N, 3), got {pts.shape}")
-    arrays.to_proto(pts.astype(np.float32, copy=False), m.points)
-    if c.colors is not None:
-        cols = np.asarray(c.colors)
-        if cols.shape != pts.shape or cols.dtype != np.uint8:
-            raise ValueError(f"colors: expected {pts.shape} uint8, got {cols.shape} {cols.dtype}")
-        arrays.to_proto(cols, m.colors)
-    _set_vec(m.origin, c.origin)
+    arrays.to_proto(cloud.points, m.points)
+    if cloud.colors is not None:
+        arrays.to_proto(cloud.colors, m.colors)
+    _set_vec(m.origin, cloud.origin)
     return m.SerializeToString()
 
 
-def decode_cloud(payload: bytes) -> Cloud:
+def decode_cloud(payload: bytes) -> CloudMessage:
     m = parse(pb.PointCloud, payload)
     if not m.HasField("points"):
         raise BadMessage("missing field", "points")
-    points = arrays.require_finite(arrays.from_proto(m.points, "points", dtype="float32", shape=(None, 3)), "points")
+    points = arrays.require_finite(arrays.from_proto(m.points, "points", dtype="float32", shape=(None, 3),
+                                                     max_items=3 * limits.MAX_CLOUD_POINTS), "points")
     colors = None
     if m.HasField("colors"):
         colors = arrays.from_proto(m.colors, "colors", dtype="uint8", shape=(len(points), 3))
     max_range = _finite(m.max_range, "max_range")
     if max_range < 0:
         raise BadMessage("out of range", f"max_range: {max_range} < 0")
-    return Cloud(_finite(m.stamp, "stamp"), _vehicle(m), m.seq, points, _vec(m.origin, "origin"), colors, max_range)
+    cloud = PointCloud(points, _vec(m.origin, "origin"), _finite(m.stamp, "stamp"), colors)
+    return CloudMessage(_vehicle(m), m.seq, cloud, max_range)
 
 
 # --- camera frames --------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class Frame:
-    stamp: float
+class FrameMessage:
+    """``layerpilot/<vehicle>/camera``: one camera frame (pose in the map frame) from ``vehicle``."""
+
     vehicle: str
     seq: int
-    image: np.ndarray  # (h, w, 3) uint8 RGB
-    intrinsics: tuple[float, float, float, float]  # fx, fy, cx, cy (pixels)
-    position: np.ndarray  # (3,) camera centre, map frame
-    orientation: np.ndarray  # (4,) w, x, y, z: camera -> map
-    depth: np.ndarray | None = None  # (h, w) float32 metres
+    frame: CameraFrame
 
 
-def encode_frame(f: Frame) -> bytes:
-    img = np.asarray(f.image)
-    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-        raise ValueError(f"image: expected (h, w, 3) uint8, got {img.shape} {img.dtype}")
-    m = pb.CameraFrame(stamp=float(f.stamp), vehicle=check_vehicle(f.vehicle), seq=int(f.seq))
-    arrays.to_proto(img, m.image)
-    if f.depth is not None:
-        d = np.asarray(f.depth, np.float32)
-        if d.shape != img.shape[:2]:
-            raise ValueError(f"depth: expected shape {img.shape[:2]}, got {d.shape}")
-        arrays.to_proto(d, m.depth)
-    fx, fy, cx, cy = (float(v) for v in f.intrinsics)
-    m.intrinsics.CopyFrom(pb.Intrinsics(fx=fx, fy=fy, cx=cx, cy=cy, width=img.shape[1], height=img.shape[0]))
-    _set_vec(m.pose.position, f.position)
-    _set_quat(m.pose.orientation, f.orientation)
+def encode_frame(f: FrameMessage) -> bytes:
+    frame = f.frame
+    if not isinstance(frame, CameraFrame):
+        raise ValueError(f"frame: expected a layerpilot.geometry.CameraFrame, got {type(frame).__name__}")
+    m = pb.CameraFrame(stamp=frame.stamp, vehicle=check_vehicle(f.vehicle), seq=int(f.seq))
+    arrays.to_proto(frame.image, m.image)
+    if frame.depth is not None:
+        arrays.to_proto(frame.depth, m.depth)
+    k = frame.intrinsics
+    m.intrinsics.CopyFrom(pb.Intrinsics(fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy, width=k.width, height=k.height))
+    _set_pose(m.pose, frame.pose)
     return m.SerializeToString()
 
 
-def decode_frame(payload: bytes) -> Frame:
+def decode_frame(payload: bytes) -> FrameMessage:
     m = parse(pb.CameraFrame, payload)
     if not m.HasField("image"):
         raise BadMessage("missing field", "image")
     k = m.intrinsics
+    if k.width * k.height > limits.MAX_FRAME_PIXELS:
+        raise BadMessage("too large", f"image: {k.width}x{k.height} is more than {limits.MAX_FRAME_PIXELS} pixels")
     image = arrays.from_proto(m.image, "image", dtype="uint8", shape=(k.height, k.width, 3))
     depth = None
     if m.HasField("depth"):
@@ -187,33 +158,39 @@ def decode_frame(payload: bytes) -> Frame:
         depth = arrays.from_proto(m.depth, "depth", dtype="float32", shape=(k.height, k.width))
         if np.any(depth < 0):
             raise BadMessage("out of range", "depth: negative values")
-    intr = np.array([k.fx, k.fy, k.cx, k.cy])
-    arrays.require_finite(intr, "intrinsics")
-    if not (k.fx > 0 and k.fy > 0):
-        raise BadMessage("out of range", f"intrinsics: focal lengths must be > 0, got {k.fx}, {k.fy}")
-    return Frame(_finite(m.stamp, "stamp"), _vehicle(m), m.seq, image, tuple(float(v) for v in intr),
-                 _vec(m.pose.position, "pose.position"), _quat(m.pose.orientation, "pose.orientation"), depth)
+    arrays.require_finite(np.array([k.fx, k.fy, k.cx, k.cy]), "intrinsics")
+    try:
+        intrinsics = CameraIntrinsics(k.fx, k.fy, k.cx, k.cy, k.width, k.height)
+    except ValueError as exc:
+        raise BadMessage("out of range", f"intrinsics: {exc}") from None
+    frame = CameraFrame(image, _pose(m.pose, "pose"), intrinsics, _finite(m.stamp, "stamp"), depth)
+    return FrameMessage(_vehicle(m), m.seq, frame)
 
 
 # --- vehicle state --------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class State:
+    """``layerpilot/<vehicle>/pose``: the vehicle's pose (body FLU -> map) and what its autopilot reports."""
+
     stamp: float
     vehicle: str
-    position: np.ndarray  # (3,) map frame
-    orientation: np.ndarray = field(default_factory=lambda: np.array([1.0, 0, 0, 0]))  # w, x, y, z body -> map
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pose: Pose
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) map frame m/s
     armed: bool = False
     mode: str = ""
     battery: float = math.nan
+
+    @property
+    def position(self) -> np.ndarray:
+        """The vehicle's position in the map frame (``pose.position``)."""
+        return self.pose.position
 
 
 def encode_state(s: State) -> bytes:
     m = pb.VehicleState(stamp=float(s.stamp), vehicle=check_vehicle(s.vehicle), armed=bool(s.armed),
                         mode=str(s.mode), battery=float(s.battery))
-    _set_vec(m.pose.position, s.position)
-    _set_quat(m.pose.orientation, s.orientation)
+    _set_pose(m.pose, s.pose)
     _set_vec(m.velocity, s.velocity)
     return m.SerializeToString()
 
@@ -225,8 +202,8 @@ def decode_state(payload: bytes) -> State:
     battery = m.battery
     if not (math.isnan(battery) or 0.0 <= battery <= 1.0):
         raise BadMessage("out of range", f"battery: {battery} not in [0, 1]")
-    return State(_finite(m.stamp, "stamp"), _vehicle(m), _vec(m.pose.position, "pose.position"),
-                 _quat(m.pose.orientation, "pose.orientation"), _vec(m.velocity, "velocity"), m.armed, m.mode, battery)
+    return State(_finite(m.stamp, "stamp"), _vehicle(m), _pose(m.pose, "pose"), _vec(m.velocity, "velocity"),
+                 m.armed, m.mode, battery)
 
 
 # --- waypoints and decisions ----------------------------------------------------------------

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from layerpilot.depth.frames import Frame, PointCloud
+from layerpilot.geometry import CameraFrame, PointCloud
 
 
 @dataclass(frozen=True)
@@ -19,7 +19,7 @@ class Score:
     rel_errors: np.ndarray  # per point; inf where the true depth is missing (sky)
 
 
-def score(cloud: PointCloud, frame: Frame, scale: float = 1.0, tolerance: float = 0.05,
+def score(cloud: PointCloud, frame: CameraFrame, scale: float = 1.0, tolerance: float = 0.05,
           max_depth: float = 100.0) -> Score:
     """Coverage is counted on the matching grid (``scale`` of the image): one point per cell."""
     if frame.depth is None:

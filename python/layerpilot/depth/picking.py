@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from layerpilot.depth.config import PickConfig
-from layerpilot.depth.frames import Frame
+from layerpilot.geometry import CameraFrame
 
 REASONS = ("blurry", "no_history", "size_mismatch", "baseline_short", "baseline_long", "rotation",
            "epipole_inside")
@@ -32,7 +32,7 @@ REASONS = ("blurry", "no_history", "size_mismatch", "baseline_short", "baseline_
 
 @dataclass(frozen=True)
 class PickResult:
-    partner: Frame | None
+    partner: CameraFrame | None
     reason: str  # "ok" or one of REASONS
     scene_depth: float
     baseline_ratio: float = float("nan")
@@ -47,26 +47,27 @@ def sharpness(image: np.ndarray) -> float:
     return float(cv2.Laplacian(grey, cv2.CV_32F).var())
 
 
-def altitude_scene_depth(frame: Frame, ground_z: float, max_depth: float) -> float:
+def altitude_scene_depth(frame: CameraFrame, ground_z: float, max_depth: float) -> float:
     """Median scene depth guessed from height over flat ground along the optical axis."""
-    down = -frame.axis[2]  # cosine between optical axis and straight down
-    height = frame.center[2] - ground_z
+    down = -frame.optical_axis[2]  # cosine between optical axis and straight down
+    height = frame.pose.position[2] - ground_z
     if down <= 1e-3 or height <= 0:
         return max_depth
     return float(np.clip(height / down, 1.0, max_depth))
 
 
-def rotation_angle_deg(a: Frame, b: Frame) -> float:
-    r = a.rotation.T @ b.rotation
+def rotation_angle_deg(a: CameraFrame, b: CameraFrame) -> float:
+    r = a.pose.rotation.T @ b.pose.rotation
     return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
 
 
-def epipole_outside(cam: Frame, other: Frame, margin: float) -> bool:
+def epipole_outside(cam: CameraFrame, other: CameraFrame, margin: float) -> bool:
     """True when ``other``'s centre projects outside ``cam``'s image (or to infinity)."""
-    c = (other.center - cam.center) @ cam.rotation
+    c = cam.pose.to_local(other.pose.position[None])[0]
     if abs(c[2]) <= 1e-9 * np.linalg.norm(c):
         return True
-    u, v = c[:2] / c[2] * np.diag(cam.K)[:2] + cam.K[:2, 2]
+    k = cam.intrinsics
+    u, v = k.fx * c[0] / c[2] + k.cx, k.fy * c[1] / c[2] + k.cy
     w, h = cam.size
     return not (-margin * w <= u <= (1 + margin) * w and -margin * h <= v <= (1 + margin) * h)
 
@@ -75,25 +76,25 @@ class FramePicker:
     """Keeps a short frame history and picks the stereo partner of each new frame."""
 
     def __init__(self, config: PickConfig = PickConfig(),
-                 scene_depth: Callable[[Frame], float] | None = None) -> None:
+                 scene_depth: Callable[[CameraFrame], float] | None = None) -> None:
         self.config = config
         self._scene_depth = scene_depth
-        self._history: deque[Frame] = deque(maxlen=config.history)
+        self._history: deque[CameraFrame] = deque(maxlen=config.history)
         self.skipped: Counter[str] = Counter()
         self.pairs = 0
 
-    def scene_depth(self, frame: Frame) -> float:
+    def scene_depth(self, frame: CameraFrame) -> float:
         if self._scene_depth is not None:
             return float(self._scene_depth(frame))
         return altitude_scene_depth(frame, self.config.ground_z, self.config.max_depth)
 
-    def push(self, frame: Frame) -> PickResult:
+    def push(self, frame: CameraFrame) -> PickResult:
         """Add ``frame`` and return its partner (or the reason there is none)."""
         cfg = self.config
         depth = self.scene_depth(frame)
         if sharpness(frame.image) < cfg.min_sharpness:
             return self._skip("blurry", depth)
-        best: tuple[float, Frame, float] | None = None
+        best: tuple[float, CameraFrame, float] | None = None
         failure, failure_stage = "no_history", -1
         for cand in reversed(self._history):
             stage, reason, ratio = self._check(frame, cand, depth)
@@ -109,9 +110,9 @@ class FramePicker:
         self.pairs += 1
         return PickResult(best[1], "ok", depth, best[2])
 
-    def _check(self, frame: Frame, cand: Frame, depth: float) -> tuple[int, str, float]:
+    def _check(self, frame: CameraFrame, cand: CameraFrame, depth: float) -> tuple[int, str, float]:
         cfg = self.config
-        ratio = float(np.linalg.norm(frame.center - cand.center)) / depth
+        ratio = float(np.linalg.norm(frame.pose.position - cand.pose.position)) / depth
         if cand.size != frame.size:
             return 0, "size_mismatch", ratio
         if ratio < cfg.min_baseline_ratio:

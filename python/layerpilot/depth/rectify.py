@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from layerpilot.depth.frames import Frame
+from layerpilot.geometry import CameraFrame
 
 
 @dataclass(frozen=True)
@@ -35,25 +35,23 @@ class RectifiedPair:
     mirrored: bool
 
 
-def _scaled(frame: Frame, scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _scaled(frame: CameraFrame, scale: float) -> tuple[np.ndarray, np.ndarray]:
     grey = cv2.cvtColor(frame.image, cv2.COLOR_RGB2GRAY)
-    K = frame.K.copy()
-    if scale != 1.0:
-        grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        K[:2, :] *= scale
-        K[:2, 2] += 0.5 * scale - 0.5  # pixel centres, not corners, keep their place
-    return grey, K
+    if scale == 1.0:
+        return grey, frame.intrinsics.K
+    grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    return grey, frame.intrinsics.scaled(scale).K  # pixel centres, not corners, keep their place
 
 
-def rectify(ref: Frame, other: Frame, scale: float = 1.0) -> RectifiedPair:
+def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> RectifiedPair:
     """Rectify ``ref`` (the frame whose view the points will come from) against ``other``."""
     if ref.size != other.size:
         raise ValueError(f"other: image size {other.size} differs from ref {ref.size}")
     grey_r, K_r = _scaled(ref, scale)
     grey_o, K_o = _scaled(other, scale)
     size = (grey_r.shape[1], grey_r.shape[0])
-    R = other.rotation.T @ ref.rotation  # x_other = R x_ref + T
-    T = other.rotation.T @ (ref.center - other.center)
+    R = other.pose.rotation.T @ ref.pose.rotation  # x_other = R x_ref + T
+    T = other.pose.rotation.T @ (ref.pose.position - other.pose.position)
     if np.linalg.norm(T) < 1e-9:
         raise ValueError("other: same camera centre as ref, no baseline")
     R1, R2, P1, P2, _, _, _ = cv2.stereoRectify(K_r, None, K_o, None, size, R, T.reshape(3, 1),

@@ -14,13 +14,14 @@ from typing import Callable, Protocol
 import numpy as np
 
 from layerpilot.depth.config import DepthConfig
-from layerpilot.depth.frames import Frame, PointCloud, camera_points_to_cloud
+from layerpilot.depth.backproject import camera_points_to_cloud
 from layerpilot.depth.picking import FramePicker
 from layerpilot.depth.stereo import StereoMatcher
+from layerpilot.geometry import CameraFrame, PointCloud
 
 
 class DepthSource(Protocol):
-    def push(self, frame: Frame) -> PointCloud | None: ...
+    def push(self, frame: CameraFrame) -> PointCloud | None: ...
 
     def stats(self) -> dict[str, int]: ...
 
@@ -29,11 +30,11 @@ class StereoDepth:
     """Two-view stereo: pick a partner for each new frame, match, filter, publish."""
 
     def __init__(self, config: DepthConfig = DepthConfig(),
-                 scene_depth: Callable[[Frame], float] | None = None) -> None:
+                 scene_depth: Callable[[CameraFrame], float] | None = None) -> None:
         self.picker = FramePicker(config.pick, scene_depth)
         self.matcher = StereoMatcher(config.match)
 
-    def push(self, frame: Frame) -> PointCloud | None:
+    def push(self, frame: CameraFrame) -> PointCloud | None:
         pick = self.picker.push(frame)
         if pick.partner is None:
             return None
@@ -55,7 +56,7 @@ class GroundTruthDepth:
         self.frames = 0
         self.skipped_no_depth = 0
 
-    def push(self, frame: Frame) -> PointCloud | None:
+    def push(self, frame: CameraFrame) -> PointCloud | None:
         if frame.depth is None:
             self.skipped_no_depth += 1
             return None
@@ -64,17 +65,16 @@ class GroundTruthDepth:
         v, u = np.nonzero(np.isfinite(depth) & (depth > 0) & (depth <= self.max_depth))
         z = depth[v, u].astype(np.float64)
         u, v = u * s, v * s
-        K = frame.K
-        cam = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+        cam = frame.intrinsics.rays(u, v) * z[:, None]
         self.frames += 1
-        return camera_points_to_cloud(frame, cam, frame.image[v, u], np.stack([u, v], axis=1))
+        return camera_points_to_cloud(frame, cam, frame.image[v, u])
 
     def stats(self) -> dict[str, int]:
         return {"frames": self.frames, "skipped_no_depth": self.skipped_no_depth}
 
 
 def make_source(kind: str, config: DepthConfig = DepthConfig(),
-                scene_depth: Callable[[Frame], float] | None = None) -> DepthSource:
+                scene_depth: Callable[[CameraFrame], float] | None = None) -> DepthSource:
     """The node's depth source by name: ``"stereo"`` or ``"ground_truth"``."""
     if kind == "stereo":
         return StereoDepth(config, scene_depth)

@@ -17,8 +17,9 @@ import cv2
 import numpy as np
 
 from layerpilot.depth.config import MatchConfig
-from layerpilot.depth.frames import Frame, PointCloud, camera_points_to_cloud
+from layerpilot.depth.backproject import camera_points_to_cloud
 from layerpilot.depth.rectify import RectifiedPair, rectify
+from layerpilot.geometry import CameraFrame, PointCloud
 
 _MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "sgbm_3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
           "hh": cv2.STEREO_SGBM_MODE_HH, "hh4": cv2.STEREO_SGBM_MODE_HH4}
@@ -46,7 +47,7 @@ class StereoMatcher:
             uniquenessRatio=c.uniqueness_ratio, speckleWindowSize=c.speckle_window,
             speckleRange=c.speckle_range, mode=_MODES[c.mode])
 
-    def disparity(self, ref: Frame, other: Frame) -> Disparity:
+    def disparity(self, ref: CameraFrame, other: CameraFrame) -> Disparity:
         c = self.config
         pair = rectify(ref, other, c.scale)
         raw = self._match(pair.left, pair.right)
@@ -95,7 +96,7 @@ class StereoMatcher:
                for im in (left, right)]
         return self._sgbm.compute(*pad)[:, n:].astype(np.float32) / 16.0
 
-    def cloud(self, ref: Frame, other: Frame) -> tuple[PointCloud, Disparity]:
+    def cloud(self, ref: CameraFrame, other: CameraFrame) -> tuple[PointCloud, Disparity]:
         """Points seen from ``ref`` (origin = ref's camera centre, stamp = ref's stamp)."""
         disp = self.disparity(ref, other)
         pair = disp.pair
@@ -109,7 +110,7 @@ class StereoMatcher:
         hh, ww = ref.image.shape[:2]
         px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
         py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
-        return camera_points_to_cloud(ref, canon, ref.image[py, px], xy, pair.to_camera), disp
+        return camera_points_to_cloud(ref, canon, ref.image[py, px], pair.to_camera), disp
 
 
 def _local_std(image: np.ndarray, block: int) -> np.ndarray:

@@ -7,31 +7,32 @@ import logging
 import math
 import threading
 
+import dataclasses
+
 import numpy as np
 import zenoh
 
 from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
-from layerpilot.bus.messages import Frame, State, decode_state, encode_frame, quat_from_matrix
+from layerpilot.bus.messages import FrameMessage, State, decode_state, encode_frame
 from layerpilot.bus.reject import Rejects
 from layerpilot.bus.session import publish
+from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.runner import WAKE_PERIOD
 
 _log = logging.getLogger("layerpilot.sim")
 
 
-def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, stamp: float, rendered, with_depth: bool,
+def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, frame: CameraFrame, with_depth: bool,
                   lift: float = 0.0) -> None:
-    """Put a rendered view (``layerpilot.sim.render.Frame``) on the vehicle's camera key.
+    """Put a rendered frame on the vehicle's camera key.
 
     ``lift``: metres the world's frame lies above the map frame (subtracted from the camera position).
     """
-    K = rendered.K
-    publish(session, k.camera, encode_frame(Frame(
-        stamp, k.vehicle, seq, rendered.color, (K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
-        rendered.pose.centre - np.array([0.0, 0.0, lift]),
-        quat_from_matrix(rendered.pose.rotation), rendered.depth if with_depth else None)))
+    pose = Pose(frame.pose.position - np.array([0.0, 0.0, lift]), frame.pose.orientation) if lift else frame.pose
+    frame = dataclasses.replace(frame, pose=pose, depth=frame.depth if with_depth else None)
+    publish(session, k.camera, encode_frame(FrameMessage(k.vehicle, seq, frame)))
 
 
 class SimNode:
@@ -45,9 +46,9 @@ class SimNode:
         self.publish_depth = publish_depth
         self.frames = 0
 
-    def _on_frame(self, stamp: float, rendered) -> None:
+    def _on_frame(self, stamp: float, frame: CameraFrame) -> None:
         self.frames += 1
-        publish_frame(self.session, self.keys, self.frames, stamp, rendered, self.publish_depth)
+        publish_frame(self.session, self.keys, self.frames, frame, self.publish_depth)
 
     def describe(self) -> dict:
         """What a user needs to connect: the MAVLink addresses actually served (port 0 = a free one), the world."""
@@ -63,12 +64,6 @@ class SimNode:
             self.sim.run(self._on_frame, speed=self.speed, duration=self.duration, stop=stop)
         finally:
             self.sim.close()
-
-
-def yaw_of(q: np.ndarray) -> float:
-    """ENU yaw (rad) of a body -> map quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 class CameraOnlyNode:
@@ -106,9 +101,9 @@ class CameraOnlyNode:
                 if (state := self.queue.get(timeout=WAKE_PERIOD)) is None or state.stamp < self._next:
                     continue
                 self._next = state.stamp + 1.0 / self.config.frame_rate_hz
-                rendered = renderer.render_vehicle(state.position + [0.0, 0.0, lift], yaw_of(state.orientation))
+                frame = renderer.render_vehicle(state.pose.position + [0.0, 0.0, lift], state.pose.yaw, state.stamp)
                 self.frames += 1
-                publish_frame(self.session, self.keys, self.frames, state.stamp, rendered, True, lift)
+                publish_frame(self.session, self.keys, self.frames, frame, True, lift)
         finally:
             self._sub.undeclare()
             renderer.close()

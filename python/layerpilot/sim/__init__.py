@@ -5,11 +5,11 @@ The vehicle dynamics and its MAVLink endpoint live in ``vehicle`` and
 Rendering needs moderngl and is imported lazily. See docs/sim.md.
 """
 
-from layerpilot.sim.camera import CameraConfig, CameraPose, camera_pose, pixel_rays
+from layerpilot.sim.camera import CameraConfig, camera_pose, pixel_rays
 from layerpilot.sim.world import World, WorldConfig
 
 
-_LAZY = {"Renderer": "render", "Frame": "render", "Simulator": "simulator", "SimConfig": "simulator"}
+_LAZY = {"Renderer": "render", "Simulator": "simulator", "SimConfig": "simulator"}
 
 
 def __getattr__(name: str):
@@ -20,5 +20,5 @@ def __getattr__(name: str):
     raise AttributeError(name)
 
 
-__all__ = ["CameraConfig", "CameraPose", "Frame", "Renderer", "SimConfig", "Simulator", "World", "WorldConfig",
+__all__ = ["CameraConfig", "Renderer", "SimConfig", "Simulator", "World", "WorldConfig",
            "camera_pose", "pixel_rays"]

@@ -1,16 +1,10 @@
-"""Pinhole camera on the drone: intrinsics K and the camera pose from the vehicle pose.
+"""The drone's camera: its configuration (size, field of view, mount pitch) and its pose from the vehicle pose.
 
-Conventions (OpenCV):
-  * camera frame: x right, y down, z forward along the optical axis;
-  * pixel (u, v) = (column, row), the centre of the top-left pixel is (0, 0);
-    a point p_c in the camera frame projects to ``K @ p_c / p_c[2]``;
-  * ``CameraPose.rotation`` is R_map_cam (columns = camera axes in the map frame,
-    maps camera-frame vectors to map-frame vectors) and ``CameraPose.centre`` is
-    the optical centre in the map frame (ENU metres), so a map point X has camera
-    coordinates ``R.T @ (X - centre)``;
-  * vehicle yaw is ENU: radians counter-clockwise from +x (east), so yaw 0 looks
-    east and pi/2 looks north. The camera sits at the vehicle position, yaw
-    follows the vehicle, pitched ``pitch_deg`` below the horizon (no roll).
+Conventions are those of ``layerpilot.geometry`` (OpenCV camera: x right, y down,
+z forward; a camera ``Pose`` maps camera coordinates to the map frame, ENU metres).
+Vehicle yaw is ENU: radians counter-clockwise from +x (east), so yaw 0 looks east
+and pi/2 looks north. The camera sits at the vehicle position, yaw follows the
+vehicle, pitched ``pitch_deg`` below the horizon (no roll).
 """
 
 from __future__ import annotations
@@ -21,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from layerpilot.config import check_range
+from layerpilot.geometry import CameraIntrinsics, Pose
 
 
 @dataclass(frozen=True)
@@ -43,26 +38,14 @@ class CameraConfig:
         check_range("far", self.far, self.near * 10, 1e6)
 
     @property
-    def K(self) -> np.ndarray:
-        """3x3 intrinsic matrix (float64): square pixels, principal point at the image centre."""
-        f = (self.width / 2) / math.tan(math.radians(self.hfov_deg) / 2)
-        return np.array([[f, 0.0, (self.width - 1) / 2], [0.0, f, (self.height - 1) / 2], [0.0, 0.0, 1.0]])
+    def intrinsics(self) -> CameraIntrinsics:
+        """Square pixels, principal point at the image centre: fx = fy = (W/2)/tan(hfov/2), cx = (W-1)/2."""
+        return CameraIntrinsics.from_fov(self.width, self.height, self.hfov_deg)
 
 
-@dataclass(frozen=True)
-class CameraPose:
-    """Rotation camera->map (3x3) and optical centre in the map frame (3,)."""
-
-    rotation: np.ndarray
-    centre: np.ndarray
-
-    def to_camera(self, points: np.ndarray) -> np.ndarray:
-        """Map-frame points (N, 3) to camera-frame points (N, 3)."""
-        return (np.asarray(points, dtype=np.float64) - self.centre) @ self.rotation
-
-
-def camera_pose(position: np.ndarray | tuple[float, float, float], yaw: float, pitch_deg: float = 60.0) -> CameraPose:
-    """Pose of the camera on a vehicle at ``position`` (ENU) with ENU ``yaw`` (rad), pitched down by ``pitch_deg``."""
+def camera_pose(position: np.ndarray | tuple[float, float, float], yaw: float, pitch_deg: float = 60.0) -> Pose:
+    """Pose (camera -> map) of the camera on a vehicle at ``position`` (ENU) with ENU ``yaw`` (rad),
+    pitched down by ``pitch_deg`` (90 = straight down)."""
     position = np.asarray(position, dtype=np.float64)
     if position.shape != (3,) or not np.all(np.isfinite(position)):
         raise ValueError(f"position must be 3 finite numbers, got {position!r}")
@@ -72,11 +55,10 @@ def camera_pose(position: np.ndarray | tuple[float, float, float], yaw: float, p
     forward = np.array([math.cos(yaw) * math.cos(th), math.sin(yaw) * math.cos(th), -math.sin(th)])
     right = np.array([math.sin(yaw), -math.cos(yaw), 0.0])
     down = np.cross(forward, right)
-    return CameraPose(np.column_stack([right, down, forward]), position.copy())
+    return Pose.from_rotation(np.column_stack([right, down, forward]), position)
 
 
-def pixel_rays(K: np.ndarray, pose: CameraPose, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def pixel_rays(intrinsics: CameraIntrinsics, pose: Pose, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Unit map-frame directions (N, 3) of the rays through pixels (u, v)."""
-    pix = np.stack([np.asarray(u, float), np.asarray(v, float), np.ones(np.shape(u))], axis=-1)
-    d = pix @ np.linalg.inv(K).T @ pose.rotation.T
+    d = intrinsics.rays(u, v) @ pose.rotation.T
     return d / np.linalg.norm(d, axis=-1, keepdims=True)

@@ -1,4 +1,4 @@
-"""Headless OpenGL renderer of the world: colour image and ground-truth depth for a camera pose.
+"""Headless OpenGL renderer of the world: a ``CameraFrame`` with ground-truth depth for a camera pose.
 
 API (for the depth estimator and the simulator)::
 
@@ -6,15 +6,15 @@ API (for the depth estimator and the simulator)::
     world = World(WorldConfig(seed=1))
     with Renderer(world, CameraConfig()) as r:          # 640x480, 90 deg HFOV, pitch 60 deg down
         pose = camera_pose((0, 0, 30), yaw=0.0, pitch_deg=r.camera.pitch_deg)
-        frame = r.render(pose)                          # or r.render_vehicle((0, 0, 30), yaw=0.0)
-    frame.color  # uint8 (H, W, 3) RGB, row 0 = top of the image
-    frame.depth  # float32 (H, W) z-depth in metres: distance along the optical axis
-                 # (camera-frame z, not the ray length), +inf where the pixel sees sky
-    frame.K      # 3x3 OpenCV intrinsics (pixel centres at integer coordinates)
-    frame.pose   # CameraPose: rotation camera->map (OpenCV camera axes), centre in the map frame
+        frame = r.render(pose, stamp=0.0)               # or r.render_vehicle((0, 0, 30), yaw=0.0)
+    frame.image       # uint8 (H, W, 3) RGB, row 0 = top of the image
+    frame.depth       # float32 (H, W) z-depth in metres: distance along the optical axis
+                      # (camera-frame z, not the ray length), +inf where the pixel sees sky
+    frame.intrinsics  # CameraIntrinsics (pixel centres at integer coordinates)
+    frame.pose        # Pose camera -> map (OpenCV camera axes)
 
-A pixel (u, v) with depth d is the map point ``pose.centre + pose.rotation @
-(d * inv(K) @ [u, v, 1])``. See ``layerpilot.sim.camera`` for the frame conventions.
+A pixel (u, v) with depth d is the map point ``pose.position + pose.rotation @
+(d * inv(K) @ [u, v, 1])``. See ``layerpilot.geometry`` for the frame conventions.
 
 The OpenGL context is a moderngl standalone context on EGL: Mesa's llvmpipe
 software rasterizer without a GPU, the GPU driver when there is one. The world's
@@ -27,11 +27,11 @@ surface point has the same colour from every viewpoint (what stereo matching nee
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 
 import numpy as np
 
-from layerpilot.sim.camera import CameraConfig, CameraPose, camera_pose
+from layerpilot.geometry import CameraFrame, CameraIntrinsics, Pose
+from layerpilot.sim.camera import CameraConfig, camera_pose
 from layerpilot.sim.world import World
 
 SKY_RGB = (160, 196, 235)
@@ -128,16 +128,6 @@ void main() {
 """
 
 
-@dataclass(frozen=True)
-class Frame:
-    """One rendered view: RGB image, z-depth (metres, inf = sky), intrinsics and camera pose."""
-
-    color: np.ndarray
-    depth: np.ndarray
-    K: np.ndarray
-    pose: CameraPose
-
-
 def _configure_llvmpipe() -> None:
     """Let llvmpipe use every core (it reads this when the driver loads); the user's setting wins."""
     os.environ.setdefault("LP_NUM_THREADS", str(os.cpu_count() or 1))
@@ -156,9 +146,10 @@ def create_context():
             "install Debian packages libegl1 libegl-mesa0 libgl1-mesa-dri") from exc
 
 
-def projection(K: np.ndarray, width: int, height: int, near: float, far: float) -> np.ndarray:
+def projection(intrinsics: CameraIntrinsics, near: float, far: float) -> np.ndarray:
     """4x4 OpenGL clip matrix for OpenCV camera coordinates; image row 0 lands in framebuffer row 0."""
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    fx, fy, cx, cy = intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+    width, height = intrinsics.size
     return np.array([
         [2 * fx / width, 0, 2 * (cx + 0.5) / width - 1, 0],
         [0, 2 * fy / height, 2 * (cy + 0.5) / height - 1, 0],
@@ -176,7 +167,7 @@ class Renderer:
         self.world = world
         self.camera = camera or CameraConfig()
         self.cull = cull  # False draws every tile (the reference for `layerpilot bench sim`)
-        self.K = self.camera.K
+        self.intrinsics = self.camera.intrinsics
         c = self.camera
         self.ctx = create_context()
         self.renderer_name = self.ctx.info["GL_RENDERER"]
@@ -192,20 +183,19 @@ class Renderer:
             color_attachments=[self.ctx.renderbuffer((c.width, c.height), 4),
                                self.ctx.renderbuffer((c.width, c.height), 1, dtype="f4")],
             depth_attachment=self.ctx.depth_renderbuffer((c.width, c.height)))
-        self._proj = projection(self.K, c.width, c.height, c.near, c.far)
+        self._proj = projection(self.intrinsics, c.near, c.far)
         self._moderngl = moderngl
         self.last_tiles_drawn = 0
 
-    def render_vehicle(self, position, yaw: float) -> Frame:
+    def render_vehicle(self, position, yaw: float, stamp: float = 0.0) -> CameraFrame:
         """Render from the camera mounted on a vehicle at ``position`` (ENU) with ENU ``yaw``."""
-        return self.render(camera_pose(position, yaw, self.camera.pitch_deg))
+        return self.render(camera_pose(position, yaw, self.camera.pitch_deg), stamp)
 
-    def render(self, pose: CameraPose) -> Frame:
-        """Colour and z-depth seen from ``pose``."""
-        R = np.asarray(pose.rotation, dtype=np.float64)
-        C = np.asarray(pose.centre, dtype=np.float64)
-        if R.shape != (3, 3) or C.shape != (3,):
-            raise ValueError(f"pose must have a 3x3 rotation and a 3-vector centre, got {R.shape} and {C.shape}")
+    def render(self, pose: Pose, stamp: float = 0.0) -> CameraFrame:
+        """Colour and z-depth seen from ``pose`` (camera -> map), stamped ``stamp`` (mission seconds)."""
+        if not isinstance(pose, Pose):
+            raise ValueError(f"pose: expected a layerpilot.geometry.Pose, got {type(pose).__name__}")
+        R, C = pose.rotation, pose.position
         view = np.eye(4)
         view[:3, :3] = R.T
         view[:3, 3] = -R.T @ C
@@ -227,7 +217,7 @@ class Renderer:
         color = rgba[:, :, :3].copy()
         color[sky] = SKY_RGB
         depth = np.where(sky, np.float32(np.inf), depth)
-        return Frame(color, depth, self.K, CameraPose(R.copy(), C.copy()))
+        return CameraFrame(color, pose, self.intrinsics, stamp, depth)
 
     def _visible_tiles(self, view: np.ndarray) -> np.ndarray:
         """Tiles whose bounding box is not entirely outside one frustum plane."""
@@ -236,7 +226,8 @@ class Renderer:
                             for ix in (0, 1) for iy in (0, 1) for iz in (0, 1)], axis=1)  # (T, 8, 3)
         p = corners @ view[:3, :3].T + view[:3, 3]
         x, y, z = p[..., 0], p[..., 1], p[..., 2]
-        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        k = self.intrinsics
+        fx, fy, cx, cy = k.fx, k.fy, k.cx, k.cy
         w, h = self.camera.width, self.camera.height
         planes = [z - self.camera.near, self.camera.far - z,
                   fx * x + (cx + 0.5) * z, (w - 0.5 - cx) * z - fx * x,

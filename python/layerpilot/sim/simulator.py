@@ -6,7 +6,7 @@ Lock-step (tests, evaluation)::
         for _ in range(500):
             shot = sim.step()          # advances the mission clock by config.step_s
             if shot is not None:       # a camera frame is due every 1 / frame_rate_hz seconds
-                stamp, frame = shot    # mission time (s), render.Frame from the vehicle's pose
+                stamp, frame = shot    # mission time (s), CameraFrame from the vehicle's pose (stamped)
 
 Process (``layerpilot sim``): :meth:`Simulator.run` paces the same steps to the
 wall clock (``speed`` times faster when > 1) and hands every frame to a callback.
@@ -69,14 +69,14 @@ class Simulator:
         return self.endpoint.time
 
     def step(self):
-        """One vehicle step; returns (mission time, Frame) when a camera frame is due, else None."""
+        """One vehicle step; returns (mission time, CameraFrame) when a camera frame is due, else None."""
         self.endpoint.step(self.config.step_s)
         if self.endpoint.time + 1e-9 < self._next_frame:
             return None
         self._next_frame += 1.0 / self.config.frame_rate_hz
         pose = self.endpoint.pose()
         self.frames += 1
-        return pose.time, self.renderer.render_vehicle(pose.position, pose.yaw)
+        return pose.time, self.renderer.render_vehicle(pose.position, pose.yaw, pose.time)
 
     def run(self, on_frame: Callable[[float, object], None] | None = None, speed: float = 1.0,
             duration: float | None = None, stop: threading.Event | None = None) -> None:

@@ -9,8 +9,8 @@ import numpy as np
 
 from layerpilot.depth.config import preset_for
 from layerpilot.depth.evaluate import score
-from layerpilot.depth.simulated import BENCH_PAIRS, render_pair
 from layerpilot.depth.stereo import StereoMatcher
+from layerpilot.eval.fixtures import BENCH_PAIRS, render_pair
 
 
 def write_preview(out: Path, width: int = 640, height: int = 480, index: int = 0, seed: int = 0) -> dict:

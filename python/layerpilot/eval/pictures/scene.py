@@ -21,7 +21,7 @@ def render_scene(
 ) -> list[Path]:
     """Build or load a map, compute every layer, decide once from ``position``, write the pictures.
 
-    Without a map, a synthetic survey leg (``layerpilot.map.synthetic``) is inserted and
+    Without a map, a synthetic survey leg (``layerpilot.eval.fixtures.survey_clouds``) is inserted and
     the decision maker ticks once at each frame's position, so the path history shows
     the leg; the drone is then at the last frame.
     """
@@ -32,10 +32,10 @@ def render_scene(
     dm = DecisionMaker(behavior, home=home)
     path_positions: list[np.ndarray] = []
     if map_path is None:
-        from layerpilot.map.synthetic import survey_frames
+        from layerpilot.eval.fixtures import survey_clouds
 
         m = VoxelMap(1.0)
-        for frame in survey_frames(frames, width=160, height=120):
+        for frame in survey_clouds(frames, width=160, height=120):
             m.insert(frame.points, frame.origin, frame.colors, frame.stamp)
             path_positions.append(frame.origin)
         source = f"synthetic survey, {frames} frames"

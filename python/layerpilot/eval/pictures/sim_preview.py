@@ -36,7 +36,7 @@ def write_preview(world: World, camera: CameraConfig, x: float, y: float, height
     top = world.surface_height(GridGeometry(-half, -half, res, n, n))
 
     fig, axes = plt.subplots(1, 3, figsize=(18, 5.4), constrained_layout=True)
-    axes[0].imshow(frame.color)
+    axes[0].imshow(frame.image)
     axes[0].set_title(f"camera {camera.width}x{camera.height}, {camera.hfov_deg:g} deg HFOV, "
                       f"pitch {camera.pitch_deg:g} deg down")
     finite = frame.depth[np.isfinite(frame.depth)]
@@ -52,7 +52,7 @@ def write_preview(world: World, camera: CameraConfig, x: float, y: float, height
     ground = float(world.terrain_height(x, y))
     t = np.where(rays[:, 2] < -1e-6, (ground - z) / np.minimum(rays[:, 2], -1e-6), 200.0)
     t = np.minimum(t, 4 * world.config.size)
-    pts = pose.centre[:2] + rays[:, :2] * t[:, None]
+    pts = pose.position[:2] + rays[:, :2] * t[:, None]
     axes[2].fill(pts[:, 0], pts[:, 1], facecolor="none", edgecolor="red", linewidth=1.5, label="view (flat ground)")
     axes[2].plot([x], [y], "r^", markersize=9, label="vehicle")
     axes[2].set_xlim(-half, half)
