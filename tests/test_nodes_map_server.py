@@ -170,3 +170,47 @@ def test_every_query_gets_an_answer(bus):
         assert server.rejects.total >= 3
     finally:
         server.stop()
+
+
+@pytest.mark.parametrize("damage", ["half", "100 bytes", "empty", "garbled header", "garbage inside"])
+def test_a_damaged_snapshot_never_stops_the_map_server(bus, tmp_path, damage, caplog):
+    """The newest snapshot is damaged: it is moved aside with an ERROR and the previous good one is served."""
+    from layerpilot.map.snapshots import SnapshotStore
+
+    server_session, _ = bus
+    path = tmp_path / "map.ot"
+    store = SnapshotStore(path, keep=3)
+    good = VoxelMap(0.5)
+    c = ground_cloud(1.0).cloud
+    good.insert(c.points, c.origin, stamp=1.0)
+    store.save(good)
+    bigger = VoxelMap(0.5)
+    for z in (0.0, 3.0):
+        c = ground_cloud(2.0, z).cloud
+        bigger.insert(c.points, c.origin, stamp=2.0)
+    store.save(bigger)
+    data = path.read_bytes()
+    damaged = {"half": data[: len(data) // 2], "100 bytes": data[:100], "empty": b"",
+               "garbled header": b"# Octomap OcTree file\nid nonsense\n" + data[40:],
+               "garbage inside": data[:len(data) // 2] + bytes(rng_bytes(4096)) + data[len(data) // 2 + 4096:]}[damage]
+    path.write_bytes(damaged)
+    mission = Mission(map_server=MapServiceConfig(resolution=0.5, snapshot=str(path)))
+    with caplog.at_level("ERROR"):
+        server = MapServer(server_session, mission)
+    assert server.map.stats()["leaves"] == good.stats()["leaves"]  # the previous good snapshot, not a part
+    assert list(tmp_path.glob("map.ot.damaged-*")), list(tmp_path.iterdir())
+    assert any("map.ot" in r.getMessage() for r in caplog.records if r.levelname == "ERROR")
+
+
+def rng_bytes(n: int) -> bytes:
+    return np.random.default_rng(3).integers(0, 256, n, dtype=np.uint8).tobytes()
+
+
+def test_all_snapshots_damaged_starts_empty_with_an_error(bus, tmp_path, caplog):
+    server_session, _ = bus
+    path = tmp_path / "map.ot"
+    path.write_bytes(b"\x00" * 100)
+    with caplog.at_level("ERROR"):
+        server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=0.5, snapshot=str(path))))
+    assert server.map.stats()["leaves"] == 0
+    assert any("starting with an empty map" in r.getMessage() for r in caplog.records)

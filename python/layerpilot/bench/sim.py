@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from layerpilot.sim.baselines import lawnmower
+from layerpilot.mission.patterns import lawnmower
 from layerpilot.sim.camera import CameraConfig
 from layerpilot.sim.world import World, WorldConfig
 
