@@ -39,6 +39,8 @@ def write_temp(path: Path, stream: bytes) -> tuple[Path, int]:
     Unique names let concurrent writers of one path all succeed; the caller renames the file into
     place (``commit``). Returns the temporary path and the bytes written.
     """
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path}: no folder {path.parent} to write the map into")
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
     data = footer(stream)
     try:

@@ -52,7 +52,6 @@ class LinkNode:
         self.waypoints = 0
         self._last_seq = -1
         self._speed = 0.0  # m/s last asked of the autopilot; 0 = its default
-        self._thread = threading.Thread(target=self._publish_loop, name="link-pose", daemon=True)
 
     def clock(self) -> float:
         return time.monotonic() - self._t0
@@ -65,7 +64,7 @@ class LinkNode:
             link.connect()
             self.connected.set()
             self.phase = "taking off"
-            self._thread.start()  # pose from now on, so the ground sees the takeoff
+            self.supervisor.start("link-pose", self._publish_pose)  # from now on, so the ground sees the takeoff
             link.wait_ready()
             link.start_guided()
             link.arm()
@@ -77,7 +76,8 @@ class LinkNode:
             return
         self.phase = "flying"
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
-                                                    guarded(decode_waypoint, self._on_waypoint, self.rejects))
+                                                    guarded(decode_waypoint, self._on_waypoint, self.rejects,
+                                                            self.supervisor))
         wait_for_stop(stop)
 
     def _on_waypoint(self, w: Waypoint, key: str) -> None:
@@ -96,21 +96,21 @@ class LinkNode:
         except (LinkError, ValueError) as exc:  # the pilot has the vehicle, the link is lost
             self.rejects.reject(key, BadMessage("waypoint refused", str(exc)))
 
-    def _publish_loop(self) -> None:
-        period = 1.0 / self.cfg.pose_rate
-        while not self._stop.wait(period):
-            t = self.link.telemetry()
-            if not t.link_ok:
-                continue
+    def _publish_pose(self) -> bool:
+        """One pose at ``pose_rate`` (a supervised loop: an error is counted, the next pose goes out)."""
+        if self._stop.wait(1.0 / self.cfg.pose_rate):
+            return False
+        t = self.link.telemetry()
+        if t.link_ok:
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
                 t.boot_time, self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
                 t.armed, t.mode, battery)))
+        return True
 
     def stop(self) -> None:
         self._stop.set()
         if self._sub is not None:
             self._sub.undeclare()
-        if self._thread.is_alive():
-            self._thread.join()
+        self.supervisor.join()
         self.link.close()
