@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -22,6 +23,13 @@ OCTOMAP_DATA = SHARED / "data" / "octomap"
 def octomap_data() -> Path:
     assert (OCTOMAP_DATA / "scan.dat.bz2").is_file(), f"reference data missing: {OCTOMAP_DATA}"
     return OCTOMAP_DATA
+
+
+def free_tcp_port() -> int:
+    """A TCP port nobody listens on right now (for a mission's simulated MAVLink vehicles)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def wait_for(cond, what: str, timeout: float = 20.0) -> None:

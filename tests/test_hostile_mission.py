@@ -6,7 +6,6 @@ memory grew by less than MEMORY_BOUND_MB, and the mission still flies: new waypo
 from __future__ import annotations
 
 import re
-import socket
 import threading
 import time
 import zlib
@@ -24,18 +23,12 @@ from layerpilot.bus.security import open_node_session
 from layerpilot.bus.session import BusConfig, free_endpoint
 from layerpilot.geometry import PointCloud, Pose
 from layerpilot.grid import GridGeometry
-from conftest import operator_session, start_up, stop_up
+from conftest import free_tcp_port, operator_session, start_up, stop_up
 from test_bus_fuzz import GOOD, mutations
 
 K = Keys("uav1")
 MEMORY_BOUND_MB = 300  # per node: the largest valid messages (1 M-point clouds, 12.6 MP frames) in full queues
 rng = np.random.default_rng(5)
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def rss_mb(pid: int) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -105,20 +106,32 @@ def behavior_file(tmp_path, text: str) -> str:
     return str(path)
 
 
-@pytest.mark.parametrize("retarget", [True, False])
-def test_live_node_retargets_while_flying_when_the_behavior_opts_in(sessions, tmp_path, retarget):
+@contextlib.contextmanager
+def started_node(sessions, tmp_path, behavior_text: str, key: str, decode):
+    """A decide node flying a fringe behavior (plus ``behavior_text``), the messages it puts on ``key``,
+    and the world's session that feeds it; it has heard the first layer set and pose when yielded."""
     node_session, world = sessions
-    behavior = behavior_file(tmp_path, f"[retarget]\nenabled = {str(retarget).lower()}\nmin_interval = 0.0\n")
-    node = DecideNode(node_session, "uav1", Mission(decide=PilotConfig(behavior=behavior)))
-    got: list[msg.Waypoint] = []
-    sub = world.declare_subscriber(Keys("uav1").waypoint, lambda s: got.append(msg.decode_waypoint(s.payload.to_bytes())))
+    node = DecideNode(node_session, "uav1", Mission(decide=PilotConfig(behavior=behavior_file(tmp_path, behavior_text))))
+    got: list = []
+    sub = world.declare_subscriber(key, lambda s: got.append(decode(s.payload.to_bytes())))
     node.start()
     try:
         k = Keys("uav1")
         time.sleep(0.5)
         world.put(k.layers, wide_payload("uav1", 20, 1.0))
         world.put(k.pose, msg.encode_state(msg.State(1.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
-        wait_for(lambda: len(got) >= 1, "the first waypoint")
+        wait_for(lambda: len(got) >= 1, "the first decision")
+        yield node, got, world
+    finally:
+        node.stop()
+        sub.undeclare()
+
+
+@pytest.mark.parametrize("retarget", [True, False])
+def test_live_node_retargets_while_flying_when_the_behavior_opts_in(sessions, tmp_path, retarget):
+    k = Keys("uav1")
+    text = f"[retarget]\nenabled = {str(retarget).lower()}\nmin_interval = 0.0\n"
+    with started_node(sessions, tmp_path, text, k.waypoint, msg.decode_waypoint) as (node, got, world):
         first = got[0].position
         world.put(k.pose, msg.encode_state(msg.State(19.0, "uav1", Pose(first * [0.5, 0.5, 1.0]))))  # halfway
         time.sleep(0.3)
@@ -129,30 +142,15 @@ def test_live_node_retargets_while_flying_when_the_behavior_opts_in(sessions, tm
         else:
             time.sleep(1.5)
             assert {w.seq for w in got} == {1}
-    finally:
-        node.stop()
-        sub.undeclare()
 
 
 def test_live_node_follows_the_weight_schedule(sessions, tmp_path):
-    node_session, world = sessions
-    behavior = behavior_file(tmp_path, "[[schedule]]\nafter_coverage = 0.5\nweights = { time = 1.0 }\n")
-    node = DecideNode(node_session, "uav1", Mission(decide=PilotConfig(behavior=behavior)))
-    decisions: list[msg.Decision] = []
-    sub = world.declare_subscriber(Keys("uav1").decision, lambda s: decisions.append(msg.decode_decision(s.payload.to_bytes())))
-    node.start()
-    try:
-        k = Keys("uav1")
-        time.sleep(0.5)
-        world.put(k.layers, wide_payload("uav1", 20, 1.0))
-        world.put(k.pose, msg.encode_state(msg.State(1.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
-        wait_for(lambda: len(decisions) >= 1, "the first decision")
+    k = Keys("uav1")
+    text = "[[schedule]]\nafter_coverage = 0.5\nweights = { time = 1.0 }\n"
+    with started_node(sessions, tmp_path, text, k.decision, msg.decode_decision) as (node, decisions, world):
         world.put(k.layers, wide_payload("uav1", 100, 40.0))  # the whole area of interest seen
         time.sleep(0.3)
         world.put(k.pose, msg.encode_state(msg.State(50.0, "uav1", Pose(decisions[0].waypoint))))  # arrived
         wait_for(lambda: len(decisions) >= 2, "the second decision")
         weighted = [{t.name for t in d.terms if t.weight > 0} - {"zone", "preference", "history"} for d in decisions]
         assert weighted[:2] == [{"fringe"}, {"time"}]
-    finally:
-        node.stop()
-        sub.undeclare()

@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import socket
 import threading
 import time
 
@@ -18,16 +17,10 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
-from conftest import SMALL_MISSION_NODES, start_up, stop_up, operator_session
+from conftest import SMALL_MISSION_NODES, free_tcp_port, operator_session, start_up, stop_up
 
 K = Keys("uav1")
 K2 = Keys("uav2")
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def map_stats(session) -> pb.MapStats | None:

@@ -3,7 +3,6 @@ seconds, with the pilot reporting waypoints reached and the vehicle's track pass
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -15,15 +14,9 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import free_endpoint
 from layerpilot.mission.build import build_pilot
 from layerpilot.mission.config import load_mission
-from conftest import start_up, stop_up, operator_session
+from conftest import free_tcp_port, operator_session, start_up, stop_up
 
 K = Keys("uav1")
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.mark.parametrize("pattern", ["lawnmower", "orbit"])

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import logging
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -15,7 +14,7 @@ import pytest
 
 from layerpilot.nodes import supervise
 from layerpilot.nodes.supervise import Supervisor
-from conftest import wait_for
+from conftest import free_tcp_port, wait_for
 
 
 def test_an_error_is_logged_once_per_kind_counted_and_the_loop_goes_on(caplog):
@@ -61,9 +60,7 @@ def test_a_stalled_loop_is_reported(monkeypatch):
 
 
 def test_up_restarts_a_failing_node_with_backoff_then_reports_it_failed(tmp_path):
-    with socket.socket() as s:  # a MAVLink port where nobody listens: the link node cannot connect
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_tcp_port()  # a MAVLink port where nobody listens: the link node cannot connect
     mission = tmp_path / "m.toml"
     mission.write_text(f'camera_only = true\n[map_server]\nsnapshot = ""\n[link.link]\nurl = "tcp:127.0.0.1:{port}"\n'
                        'connect_timeout_s = 0.5\n')
