@@ -181,7 +181,7 @@ height = 120
 
         # the mission goes on: fresh waypoints, every node alive without a restart, memory bounded
         seen = max(w.seq for w in waypoints if w.seq < 10_000)
-        end = time.monotonic() + 90
+        end = time.monotonic() + 180  # a bound on waiting, generous for a loaded machine
         while max(w.seq for w in waypoints if w.seq < 10_000) < seen + 2:
             assert up.poll() is None and time.monotonic() < end, "".join(lines[-30:])
             time.sleep(0.2)

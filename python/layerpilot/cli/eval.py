@@ -109,7 +109,7 @@ def _study(args: argparse.Namespace) -> None:
     import numpy as np
 
     from layerpilot.eval.summary import write_study_report
-    from layerpilot.mission.config import to_tables
+    from layerpilot.mission.config import to_settings
     from layerpilot.mission.pilot import PATTERNS, PilotConfig
     from layerpilot.progress import Progress
 
@@ -139,7 +139,8 @@ def _study(args: argparse.Namespace) -> None:
             finals[futures[future]].append(final)
             progress.update(done, f"{Path(run_dir).name} {final['percent_mapped']:.1f}% mapped in {wall:.0f}s")
     runs = {b: sorted(d) for b, d in runs.items()}
-    paths = write_study_report(out, runs, {"mission": to_tables(mission), "quick": args.quick})
+    shared = {k: v for k, v in to_settings(mission).items() if k not in ("decide.behavior", "decide.seed")}
+    paths = write_study_report(out, runs, {**shared, "quick": args.quick})
     with warnings.catch_warnings():  # a metric that is NaN in every seed stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
         means = {b: {k: float(np.nanmean([f[k] for f in fs])) for k in fs[0]} for b, fs in finals.items()}

@@ -30,7 +30,7 @@ import numpy as np
 from layerpilot.eval.metrics import area_metrics, map_voxel_metrics
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
-from layerpilot.mission.config import Mission, to_tables
+from layerpilot.mission.config import Mission, to_settings
 from layerpilot.mission.pilot import Command
 from layerpilot.progress import Progress
 
@@ -215,7 +215,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                                   options=pilot.behavior.layers), pilot.behavior.layer_names, est)
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
-    settings = {"mission": to_tables(mission), "waypoints": len(records), "reached": pilot.reached,
+    settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
                 "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                 "frames": frames, "clouds": depth.clouds,
                 **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud

@@ -148,5 +148,20 @@ def _set(tables: dict[str, Any], key: str, value: Any) -> None:
 
 
 def to_tables(mission: Mission) -> dict[str, Any]:
-    """The mission as plain tables (for run reports and for handing a parsed mission to a process)."""
+    """The mission as plain nested tables."""
     return dataclasses.asdict(mission)
+
+
+def to_settings(mission: Mission) -> dict[str, Any]:
+    """The mission as one flat table of dotted keys (``sim.world.seed``), as run reports show it."""
+    flat: dict[str, Any] = {}
+
+    def walk(table: dict[str, Any], prefix: str) -> None:
+        for key, value in table.items():
+            if isinstance(value, dict) and value and key not in ("transport", "access_control"):
+                walk(value, f"{prefix}{key}.")
+            else:
+                flat[prefix + key] = value
+
+    walk(to_tables(mission), "")
+    return flat
