@@ -34,3 +34,6 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         print(f"layerpilot: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # permissions, a full disk, a busy port: the user can act on the one line
+        print(f"layerpilot: error: {exc}", file=sys.stderr)
+        return 1
