@@ -48,7 +48,6 @@ class MapServer:
         self.layer_sets_published = 0
         self.queries_answered = 0
         self.snapshots_written = 0
-        self.heard: set[str] = set()  # mission vehicles that sent a cloud: they get layer sets
         self._stop = threading.Event()
         self._save_lock = threading.Lock()
         self._pool = ThreadPoolExecutor(self.cfg.query_threads, thread_name_prefix="map-query")
@@ -90,7 +89,6 @@ class MapServer:
         if vehicle not in self.vehicles:  # per-vehicle state only for the mission's vehicles
             self.rejects.reject(key, BadMessage("unknown vehicle", f"{vehicle!r} is not one of {self.vehicles}"))
             return
-        self.heard.add(vehicle)
         self.queue.put(cloud)
 
     def _insert_one(self) -> bool:
@@ -112,13 +110,17 @@ class MapServer:
                                                   column_arrays(cl, names or self.cfg.layers)))
 
     def _publish_due(self) -> bool:
-        """A layer set per vehicle heard from, every 1 / layers_rate s (the transport's pacing: wall clock)."""
+        """A layer set per mission vehicle every 1 / layers_rate s (the transport's pacing: wall clock).
+
+        From the start, an empty map too: a drone whose stereo needs motion to give its first cloud
+        must get a first decision (the pilot's fallback flies it into the area), as in lock-step.
+        """
         if self._stop.wait(min(WAIT, max(0.0, self._next_publish - time.monotonic()))):
             return False
         if time.monotonic() < self._next_publish:
             return True
         self._next_publish = max(self._next_publish + 1.0 / self.cfg.layers_rate, time.monotonic() - 1.0)
-        for v in sorted(self.heard):
+        for v in self.vehicles:
             key = keys.Keys(v).layers
             try:
                 publish(self.session, key, self.layer_set(v))
