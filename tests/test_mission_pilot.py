@@ -108,3 +108,13 @@ def test_a_drone_without_priority_chooses_again_when_another_takes_its_target() 
     again = pilot.step((0.0, 0.0, 50.0), 2.0, cols, avoid=[near], yield_to=[near])
     assert again is not None and again.reason == "conflict"
     assert np.hypot(again.position[0] - near[0], again.position[1] - near[1]) >= pilot.behavior.r_e
+
+
+def test_an_arrival_is_counted_once_while_the_next_choice_waits_for_layers() -> None:
+    pilot = Pilot(PilotConfig(), behavior_from_dict(fringe_behavior()))
+    first = pilot.step((0.0, 0.0, 50.0), 1.0, ground_columns(20, 1.0))
+    for t in (2.0, 2.1, 2.2):  # arrived, but the layer set was dropped (e.g. it failed to decode)
+        assert pilot.step(first.position, t, None) is None
+    assert pilot.reached == 1
+    nxt = pilot.step(first.position, 3.0, ground_columns(20, 2.0))
+    assert nxt is not None and nxt.reason == "reached" and pilot.reached == 1

@@ -96,6 +96,7 @@ class Pilot:
         self.evaluations = 0  # decide + reconsider calls: when the pilot looked at the layers
         self._next_pattern = 0
         self._reconsidered: ColumnLayers | None = None
+        self._waiting: str | None = None  # why a new command is due, while it waits for layers
 
     @property
     def cruise_speed(self) -> float:
@@ -121,15 +122,17 @@ class Pilot:
         r_e of ours (both decided before hearing each other), we choose again.
         A retargeting behavior is reconsidered once per new ``columns`` object while flying.
         """
-        reason = None
         if self.target is None:
-            reason = "start"
+            reason = self._waiting or "start"
         elif self.arrived(position):
             self.reached += 1
-            reason = "reached"
+            self.target, reason = None, "reached"  # counted once, even if the next choice must wait
         elif self.maker is not None and self._conflicts(yield_to):
             reason = "conflict"
+        else:
+            reason = None
         if reason is not None:
+            self._waiting = reason
             if self.pattern is not None:
                 return self._from_pattern(time, reason)
             if columns is None:
@@ -166,5 +169,5 @@ class Pilot:
     def _command(self, time: float, wp: tuple[float, float, float], yaw: float, speed: float,
                  decision: Decision | None, reason: str) -> Command:
         self.seq += 1
-        self.target = np.array(wp)
+        self.target, self._waiting = np.array(wp), None
         return Command(self.seq, float(time), wp, float(yaw), float(speed), decision, reason)
