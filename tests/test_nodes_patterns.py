@@ -80,3 +80,7 @@ height = 120
             client.close()
         stop_up(up)
     assert up.returncode == 0, "".join(lines[-20:])
+    # issue 14 item 2: `up` stops the link first, while the simulated vehicle still flies, and the
+    # link commands the mission's end action (RTL) and sees it acknowledged before it exits
+    link_log = (tmp_path / "logs" / "link-uav1.log").read_text()
+    assert link_log.count("mission end: RTL acknowledged (COMMAND_ACK accepted, mode RTL)") == 1, link_log[-3000:]

@@ -20,7 +20,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--compid", type=int, help="our MAVLink component id (default 191, onboard computer)")
     p.add_argument("--timeout", type=float,
                    help="the longest any one wait may take: the connection, readiness, arming, a mode change "
-                        "and, for an action, the action itself (default: 30 s to connect, 60 s to be ready, "
+                        "and, for an action, the action itself (default: 30 s to connect, 120 s to be ready, "
                         "10 s to arm, 5 s for a mode, and each action's own bound)")
     p.add_argument("--tolerance", type=float, help="arrival tolerance in metres (default 1)")
     sub = p.add_subparsers(dest="link_command", metavar="ACTION")
@@ -50,9 +50,15 @@ def _node(args, mission, vehicle, session) -> Running:
     link = node.link
 
     def status() -> dict:
-        return {"phase": node.phase, "waypoints": node.waypoints, "rejected": node.rejects.total,
-                "refused": dict(link.refused),  # by the geofence, per kind
-                "telemetry": link.telemetry().line() if link.flavour else "no autopilot heard yet"}
+        out = {"phase": node.phase, "waypoints": node.waypoints, "rejected": node.rejects.total,
+               "refused": dict(link.refused),  # by the geofence, per kind
+               "pose": node.pose_state(), "poses": node.poses,
+               "telemetry": link.telemetry().line() if link.flavour else "no autopilot heard yet"}
+        if node.phase == "waiting for the autopilot":
+            out["missing"] = link.missing()  # what keeps the autopilot from being ready
+        if node.end:
+            out["end"] = node.end  # the mission's end action: "RTL acknowledged (...)" or why not
+        return out
 
     return Running(status, node.stop, {"mavlink": node.cfg.link.url, "geofence": link.geofence.describe()},
                    node.run, supervisor=node.supervisor, ready=node.connected)
@@ -74,11 +80,9 @@ def _act(args: argparse.Namespace) -> int:
     """One action; every wait is bounded by --timeout when given. Exit 0 when done, 1 with one line on
     stderr when the vehicle or the link refused or timed out (2 for a bad flag, from main)."""
     import dataclasses
-    import math
-    import sys
+    import logging
 
     from layerpilot.cli.nodes import mission_from_args
-    from layerpilot.link.link import FlightLink, LinkError
     from layerpilot.mission.build import geofence_for
 
     mission = mission_from_args(args, LINK_FLAGS)
@@ -88,8 +92,25 @@ def _act(args: argparse.Namespace) -> int:
         config = dataclasses.replace(config, command_timeout_s=min(config.command_timeout_s,
                                                                    args.timeout / (config.command_retries + 1)))
     action = args.link_command
-    with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True),
-                    geofence=geofence_for(mission)) as link:
+    # each report prints once, on stdout as `link: ...` (on_event below); the logger's copy would repeat
+    # every warning on stderr, where only the one error line belongs
+    logger, quiet = logging.getLogger("layerpilot.link"), logging.NullHandler()
+    logger.addHandler(quiet)
+    logger.propagate = False
+    try:
+        return _fly(args, action, config, bound, geofence_for(mission))
+    finally:
+        logger.removeHandler(quiet)
+        logger.propagate = True
+
+
+def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence) -> int:
+    import math
+    import sys
+
+    from layerpilot.link.link import FlightLink, LinkError
+
+    with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True), geofence=geofence) as link:
         try:
             link.connect()
             link.wait_ready()

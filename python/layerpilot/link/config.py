@@ -28,7 +28,7 @@ class LinkConfig:
     heartbeat_timeout_s: float = 3.0  # no autopilot HEARTBEAT for this long = link lost
     long_loss_s: float = 20.0         # a loss longer than this triggers long_loss_action when the link returns
     long_loss_action: Literal["none", "rtl", "land"] = "none"
-    ready_timeout_s: float = 60.0
+    ready_timeout_s: float = 120.0     # a cold-started ArduPilot SITL took 41 s to be ready
     command_timeout_s: float = 1.5    # per COMMAND_LONG attempt
     command_retries: int = 3
     arm_timeout_s: float = 10.0

@@ -50,6 +50,10 @@ POSITION_AND_YAW = 0b100111111000   # as above plus yaw
 POSITION_FRESH_S = 2.0              # a position estimate older than this does not count
 WAKE_S = 0.2                        # longest single sleep of a wait (see _wait)
 RECONNECT_PERIOD_S = 1.0            # while lost, a stream connection (TCP, serial) is reopened this often
+READY_REPORT_S = 15.0               # while waiting for readiness, say what is still missing this often
+END_ACTIONS = {"rtl": "RTL", "land": "LAND", "loiter": "LOITER"}  # mission end action -> the mode it puts
+# ArduPilot's EKF_STATUS_REPORT flags: a horizontal position (absolute or relative) and not uninitialised
+EKF_POSITION = mav.EKF_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_REL
 
 
 class LinkError(RuntimeError):
@@ -104,6 +108,7 @@ class FlightLink:
         self._open()
         self._cond = threading.Condition()
         self._stop = threading.Event()
+        self._interrupted = threading.Event()  # interrupt(): the waits end, the connection stays up
         # autopilot state (guarded by _cond)
         self.flavour: str | None = None
         self.target_system = self.config.target_system
@@ -117,6 +122,7 @@ class FlightLink:
         self._unhealthy: list[str] = []
         self._gps_fix = -1
         self._position_at = -math.inf
+        self._ekf_flags: int | None = None  # ArduPilot EKF_STATUS_REPORT flags, once one arrived
         self._pose_time = 0.0
         self._boot_time = 0.0
         self._position = np.zeros(3)
@@ -152,6 +158,13 @@ class FlightLink:
         self._thread.join(timeout=2.0)
         self._close_connection()
 
+    def interrupt(self) -> None:
+        """End every wait of the mission thread (they raise :class:`LinkError`) and refuse further
+        commands, but keep the connection: :meth:`end_mission` can still command the end action."""
+        self._interrupted.set()
+        with self._cond:
+            self._cond.notify_all()
+
     def __enter__(self) -> FlightLink:
         return self
 
@@ -175,6 +188,17 @@ class FlightLink:
     def armed(self) -> bool:
         return self._armed
 
+    @property
+    def position_valid(self) -> bool:
+        """The autopilot has a position: a LOCAL_POSITION_NED arrived and, if it reports its EKF
+        (ArduPilot's EKF_STATUS_REPORT), the EKF has a horizontal position. Until then the
+        position is (0, 0, 0) and means nothing."""
+        return self._position_at > -math.inf and self._ekf_position_ok()
+
+    def _ekf_position_ok(self) -> bool:
+        flags = self._ekf_flags
+        return flags is None or bool(flags & EKF_POSITION and not flags & mav.EKF_UNINITIALIZED)
+
     def telemetry(self) -> Telemetry:
         with self._cond:
             roll, pitch, yaw = self._attitude
@@ -188,12 +212,15 @@ class FlightLink:
         """What still keeps the vehicle from being ready to fly (empty when ready)."""
         out = []
         if not self._link_ok:
-            out.append("autopilot HEARTBEAT")
+            out.append("autopilot HEARTBEAT" + (" (none heard yet)" if self.flavour is None else
+                                                f" (none for {time.monotonic() - self._last_heartbeat:.0f} s)"))
         if not self._prearm_ok:
             out.append("pre-arm checks (SYS_STATUS)" + (f": unhealthy {', '.join(self._unhealthy)}"
                                                          if self._unhealthy else ""))
         if self._gps_fix != -1 and self._gps_fix < mav.GPS_FIX_TYPE_3D_FIX:
             out.append(f"GPS 3D fix (fix_type {self._gps_fix})")
+        if not self._ekf_position_ok():
+            out.append(f"EKF position (EKF_STATUS_REPORT flags 0x{self._ekf_flags:x})")
         if time.monotonic() - self._position_at > POSITION_FRESH_S:
             out.append("position estimate (LOCAL_POSITION_NED)")
         if self._home is None:
@@ -203,14 +230,22 @@ class FlightLink:
     def wait_ready(self, timeout: float | None = None) -> None:
         """Block until pre-arm checks pass and a position estimate and home arrive; NotReady names what is missing."""
         timeout = self.config.ready_timeout_s if timeout is None else timeout
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        deadline = start + timeout
         next_home_request = 0.0
+        next_report = start + READY_REPORT_S
         while self.missing():
-            if time.monotonic() >= deadline:
+            self._check_interrupted("waiting for the autopilot to be ready")
+            now = time.monotonic()
+            if now >= deadline:
                 missing = self.missing()
                 texts = [t for t in self._texts[-5:] if "arm" in t.lower() or "fail" in t.lower()]
                 raise NotReady(f"vehicle not ready after {timeout:.1f} s; missing: {'; '.join(missing)}"
                                + (f"; autopilot says: {' | '.join(texts)}" if texts else ""), missing)
+            if now >= next_report:  # a cold-started SITL takes tens of seconds: say what it still lacks
+                next_report = now + READY_REPORT_S
+                self._report(f"waiting for the autopilot to be ready ({now - start:.0f} s of {timeout:.0f} s); "
+                             f"missing: {'; '.join(self.missing())}", logging.INFO)
             if self._home is None and self._link_ok and time.monotonic() >= next_home_request:
                 self._command_long(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
                 next_home_request = time.monotonic() + 1.0
@@ -220,14 +255,69 @@ class FlightLink:
     def set_mode(self, name: str) -> None:
         """Command flight mode ``name`` (ArduCopter or PX4 name) and wait until the HEARTBEAT shows it."""
         self._require_link()
-        custom = modes.custom_mode_of(self.flavour, name)
-        if self.flavour == modes.PX4:
-            main, sub = (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
-            self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
-        else:
-            self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom)
+        self.command(mav.MAV_CMD_DO_SET_MODE, *self._mode_params(name))
         if not self._wait(lambda: self._mode == name, self.config.mode_timeout_s):
             raise LinkError(f"mode {name} accepted but the HEARTBEAT still says {self._mode}")
+
+    def _mode_params(self, name: str) -> tuple[float, ...]:
+        """DO_SET_MODE's parameters for mode ``name`` (ArduCopter custom mode; PX4 main/sub mode)."""
+        custom = modes.custom_mode_of(self.flavour, name)
+        if self.flavour == modes.PX4:
+            return mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
+        return mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom
+
+    def end_mission(self, action: str, timeout: float) -> tuple[bool, str]:
+        """The mission's end: command ``action`` (``rtl``, ``land`` or ``loiter``) and wait at most
+        ``timeout`` s for its COMMAND_ACK and the HEARTBEAT's mode change. Returns (acknowledged,
+        what happened); never raises. Clears :meth:`interrupt`; nothing is sent to a disarmed vehicle
+        (it is on the ground) nor over a lost link. The current waypoint is dropped first."""
+        what = END_ACTIONS[action]
+        self._interrupted.clear()
+        deadline = time.monotonic() + timeout
+        if self.flavour is None:
+            return self._ended(False, f"{what} not sent: no autopilot heard on {self.config.url}")
+        if not self._link_ok:
+            return self._ended(False, f"{what} not sent: link lost (no HEARTBEAT for "
+                                      f"{time.monotonic() - self._last_heartbeat:.1f} s)")
+        if not self._armed:
+            return self._ended(True, f"{what} not needed: the vehicle is disarmed (on the ground, mode {self._mode})")
+        with self._cond:
+            self._in_control, self._paused, self._setpoint, self._stream_hold = False, False, None, False
+            self._abandoned = f"mission end: {what}"
+        command, params = {"rtl": (mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, ()), "land": (mav.MAV_CMD_NAV_LAND, ()),
+                           "loiter": (mav.MAV_CMD_DO_SET_MODE, self._mode_params(what))}[action]
+        with self._cond:
+            self._waited.add(command)
+            self._acks.pop(command, None)
+        result, tries = None, 0
+        try:
+            while result is None and time.monotonic() < deadline and self._link_ok and not self._stop.is_set():
+                self._command_long(command, *params, confirmation=tries)
+                tries += 1
+                left = min(self.config.command_timeout_s, deadline - time.monotonic())
+                if self._wait(lambda: self._acks.get(command, mav.MAV_RESULT_IN_PROGRESS)
+                              != mav.MAV_RESULT_IN_PROGRESS, left):
+                    result = self._acks[command]
+        finally:
+            with self._cond:
+                self._waited.discard(command)
+        if result is None:
+            why = "link lost" if not self._link_ok else f"no COMMAND_ACK after {tries} tries in {timeout:.1f} s"
+            return self._ended(False, f"{what} not acknowledged: {why}")
+        if result != mav.MAV_RESULT_ACCEPTED:
+            return self._ended(False, f"{what} rejected: {modes.result_name(result)}")
+        if not self._wait(lambda: self._mode == what, max(0.0, deadline - time.monotonic())):
+            return self._ended(False, f"{what} accepted (COMMAND_ACK) but the HEARTBEAT still says mode "
+                                      f"{self._mode} after {timeout:.1f} s")
+        return self._ended(True, f"{what} acknowledged (COMMAND_ACK accepted, mode {what})")
+
+    def _ended(self, ok: bool, text: str) -> tuple[bool, str]:
+        self._report(f"mission end: {text}", logging.INFO if ok else logging.WARNING)
+        return ok, text
+
+    def _check_interrupted(self, doing: str) -> None:
+        if self._interrupted.is_set():
+            raise LinkError(f"interrupted while {doing}")
 
     def start_guided(self) -> None:
         """Take control: GUIDED on ArduPilot; on PX4 stream setpoints for ``offboard_prestream_s`` then OFFBOARD."""
@@ -347,6 +437,7 @@ class FlightLink:
     def command(self, command: int, *params: float) -> None:
         """Send COMMAND_LONG and wait for its ACK; CommandRejected unless MAV_RESULT_ACCEPTED."""
         self._require_link()
+        self._check_interrupted(f"sending {modes.command_name(command)}")
         result = self._command_ack(command, params)
         if result != mav.MAV_RESULT_ACCEPTED:
             raise CommandRejected(command, result)
@@ -375,6 +466,7 @@ class FlightLink:
                     return result
                 if not self._link_ok:
                     raise LinkLost(f"{modes.command_name(command)}: link lost while waiting for COMMAND_ACK")
+                self._check_interrupted(f"waiting for the COMMAND_ACK of {modes.command_name(command)}")
             raise LinkError(f"{modes.command_name(command)}: no COMMAND_ACK after "
                             f"{self.config.command_retries + 1} tries")
         finally:
@@ -441,6 +533,7 @@ class FlightLink:
         while time.monotonic() < deadline:
             if self._stop.is_set():
                 raise LinkError("link closed")
+            self._check_interrupted("flying to a waypoint")
             if use_setpoint and self._abandoned:
                 raise LinkLost(f"waypoint abandoned: {self._abandoned}") if "link loss" in self._abandoned \
                     else LinkError(f"waypoint abandoned: {self._abandoned}")
@@ -591,6 +684,8 @@ class FlightLink:
                 self._unhealthy = [e.name.replace("MAV_SYS_STATUS_", "") for bit, e in
                                    mav.enums["MAV_SYS_STATUS_SENSOR"].items() if bit & bad and bit]
                 self._battery = (msg.voltage_battery / 1000.0, msg.battery_remaining)
+            elif kind == "EKF_STATUS_REPORT":
+                self._ekf_flags = msg.flags
             elif kind == "GPS_RAW_INT":
                 self._gps_fix = msg.fix_type
             elif kind == "HOME_POSITION":
@@ -675,7 +770,7 @@ class FlightLink:
         process's main thread, which must get back to the interpreter for a signal to be handled."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            while not (predicate() or self._stop.is_set()):
+            while not (predicate() or self._stop.is_set() or self._interrupted.is_set()):
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False

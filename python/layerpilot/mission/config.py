@@ -34,11 +34,16 @@ class LinkSettings:
     takeoff_altitude: float = 30.0  # m above home
     pose_rate: float = 10.0  # Hz
     geofence_margin: float = 20.0  # m the geofence reaches beyond the behavior's area of interest
+    end_action: str = "rtl"  # what the link node commands when the mission ends: rtl, land or loiter
+    end_timeout: float = 10.0  # s the link node waits for the end action's COMMAND_ACK and mode change
 
     def __post_init__(self) -> None:
         check_range("link.takeoff_altitude", self.takeoff_altitude, 1.0, 500.0)
         check_range("link.pose_rate", self.pose_rate, 0.1, 100.0)
         check_range("link.geofence_margin", self.geofence_margin, 0.0, 10_000.0)
+        if self.end_action not in ("rtl", "land", "loiter"):
+            raise ConfigError(f"link.end_action: expected 'rtl', 'land' or 'loiter', got {self.end_action!r}")
+        check_range("link.end_timeout", self.end_timeout, 1.0, 12.0)  # inside `up`'s 15 s stop grace
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,11 @@
 
 At start it connects, waits until the autopilot is ready, takes control (GUIDED /
 OFFBOARD), arms and climbs to ``takeoff_altitude``; then every waypoint becomes a
-setpoint and the pose is published at ``pose_rate``. Pose stamps are the autopilot's
+setpoint and the pose is published at ``pose_rate`` (only once the autopilot has a
+position: no (0, 0, 0) pose before the first LOCAL_POSITION_NED). When the node stops
+(SIGTERM, Ctrl-C, `up --duration`, or a failure) it commands the mission's end action
+(``end_action``: RTL, LAND or LOITER) and waits up to ``end_timeout`` for the autopilot to
+acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervising it. Pose stamps are the autopilot's
 clock (time_boot_ms): the simulator stamps its camera frames, and so the clouds and layer
 sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
@@ -36,8 +40,9 @@ class LinkNode:
     outside it, and each refusal is logged once per kind and counted in ``rejects``.
 
     ``connected`` is set once the autopilot's HEARTBEAT was heard (the node says ``ready`` then,
-    ``connecting`` before); ``phase`` is ``connecting``, ``taking off`` or ``flying``; a link that
-    cannot connect or take off fails the node (``supervisor.failure`` says why)."""
+    ``connecting`` before); ``phase`` is ``connecting``, ``waiting for the autopilot``, ``taking off``,
+    ``flying``, ``ending`` or ``ended``; a link that cannot connect or take off fails the node
+    (``supervisor.failure`` says why). ``end`` says what the end action did (see :meth:`stop`)."""
 
     def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence) -> None:
         self.session, self.keys, self.cfg = session, keys.Keys(vehicle), cfg
@@ -52,20 +57,26 @@ class LinkNode:
         self.waypoints = 0
         self._last_seq = -1
         self._speed = 0.0  # m/s last asked of the autopilot; 0 = its default
+        self.end = ""  # what the mission's end action did, once the node stops
+        self.poses = 0
+        self._interrupter: threading.Thread | None = None
 
     def clock(self) -> float:
         return time.monotonic() - self._t0
 
     def run(self, stop: threading.Event) -> None:
         """Connect, take off, then follow waypoints until ``stop``; a stop during the takeoff aborts it."""
-        threading.Thread(target=lambda: (stop.wait(), self.link.close()), daemon=True).start()
+        # a stop ends the link's waits but keeps its connection: stop() still commands the end action
+        self._interrupter = threading.Thread(target=lambda: (stop.wait(), self.link.interrupt()), daemon=True)
+        self._interrupter.start()
         link = self.link
         try:
             link.connect()
             self.connected.set()
-            self.phase = "taking off"
+            self.phase = "waiting for the autopilot"
             self.supervisor.start("link-pose", self._publish_pose)  # from now on, so the ground sees the takeoff
             link.wait_ready()
+            self.phase = "taking off"
             link.start_guided()
             link.arm()
             link.takeoff(self.cfg.takeoff_altitude)
@@ -100,17 +111,36 @@ class LinkNode:
         """One pose at ``pose_rate`` (a supervised loop: an error is counted, the next pose goes out)."""
         if self._stop.wait(1.0 / self.cfg.pose_rate):
             return False
+        if not self.link.position_valid:  # (0, 0, 0) before the autopilot's first position is no pose
+            return True
         t = self.link.telemetry()
         if t.link_ok:
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
                 t.boot_time, self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
                 t.armed, t.mode, battery)))
+            self.poses += 1
         return True
 
+    def pose_state(self) -> str:
+        """For the status line: whether poses go out, or what they wait for."""
+        if self.link.flavour is None:
+            return "waiting for the autopilot"
+        if not self.link.position_valid:
+            return "waiting for a position (LOCAL_POSITION_NED" + \
+                (", EKF)" if "EKF" in " ".join(self.link.missing()) else ")")
+        return "publishing"
+
     def stop(self) -> None:
+        """No more waypoints, then the mission's end action (``end_action``, bounded by ``end_timeout``),
+        then close the link. ``end`` says what happened (``RTL acknowledged ...`` or why not)."""
         self._stop.set()
         if self._sub is not None:
             self._sub.undeclare()
         self.supervisor.join()
+        if self._interrupter is not None:
+            self._interrupter.join(timeout=1.0)  # its interrupt() lands before the end action clears it
+        failed, self.phase = self.phase == "failed", "ending"
+        _, self.end = self.link.end_mission(self.cfg.end_action, self.cfg.end_timeout)
+        self.phase = "failed" if failed else "ended"
         self.link.close()

@@ -26,7 +26,7 @@ MAX_RESTART_DELAY = 30.0  # s
 HEALTHY_AFTER = 60.0  # s alive: the node's failures in a row start over
 MAX_FAILURES = 5  # failures in a row after which a node is reported failed and left down
 CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
-STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL
+STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL (links first, then the rest: see Supervisor.stop)
 
 
 @dataclass
@@ -146,13 +146,22 @@ class Supervisor:
         return events
 
     def stop(self) -> None:
-        """SIGTERM every node (each finishes its current message), SIGKILL what is left after STOP_GRACE."""
+        """SIGTERM the link nodes first and wait for them (each commands the mission's end action,
+        RTL by default, and waits at most ``link.end_timeout`` <= 12 s for the autopilot's answer,
+        while the simulated vehicles still run); then SIGTERM every other node (each finishes its
+        current message). Each stage SIGKILLs what is left after STOP_GRACE."""
         self.stopping.set()
-        for n in reversed(self.nodes):
+        links = [n for n in self.nodes if n.name.startswith("link/")]
+        self._stop_group(links)
+        self._stop_group([n for n in reversed(self.nodes) if n not in links])
+
+    @staticmethod
+    def _stop_group(nodes: list[NodeProcess]) -> None:
+        for n in nodes:
             if n.alive():
                 n.proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_GRACE
-        for n in self.nodes:
+        for n in nodes:
             if n.proc is None:
                 continue
             try:
