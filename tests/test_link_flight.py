@@ -32,6 +32,12 @@ def start_vehicle(flavour: str = "ardupilot", speed: float = SPEED, **config) ->
     return MavlinkVehicle(vehicle, "tcp:127.0.0.1:0", EndpointConfig(flavour=flavour, **config)).start(speed=speed)
 
 
+def local(endpoint: MavlinkVehicle) -> np.ndarray:
+    """The vehicle's position in the autopilot's local frame (ENU), the frame the link flies: like ArduCopter's,
+    its origin is the EKF origin on the ground at home (here 2 m above the simulated world's datum)."""
+    return endpoint.pose().position - endpoint.ekf_origin
+
+
 def url_of(endpoint: MavlinkVehicle) -> str:
     return f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
 
@@ -61,19 +67,21 @@ def wait_until(predicate, timeout: float, what: str) -> None:
 def test_full_flight(vehicle, link):
     assert link.flavour == "ardupilot" and (link.target_system, link.target_component) == (1, 1)
     tel = link.telemetry()
-    assert np.allclose(tel.home, (0.0, 0.0, 2.0)) and np.allclose(tel.position, (0.0, 0.0, 2.0), atol=0.01)
+    # home on the ground is the EKF origin: (0, 0, 0) in the autopilot's frame, 2 m above the world's datum
+    assert np.allclose(tel.home, (0.0, 0.0, 0.0)) and np.allclose(tel.position, (0.0, 0.0, 0.0), atol=0.01)
+    assert np.allclose(vehicle.ekf_origin, (0.0, 0.0, 2.0))
     assert tel.battery_voltage == pytest.approx(16.8, abs=0.01) and tel.battery_remaining == 100
     link.start_guided()
     assert vehicle.mode == "GUIDED"
     link.arm()
     link.takeoff(25.0)
     assert vehicle.pose().position[2] == pytest.approx(27.0, abs=0.6)
-    route = [(40.0, 0.0, 27.0), (40.0, 30.0, 32.0), (-10.0, 30.0, 27.0)]
+    route = [(40.0, 0.0, 25.0), (40.0, 30.0, 30.0), (-10.0, 30.0, 25.0)]
     for i, wp in enumerate(route):
         link.goto(*wp, look_at=(40.0, 100.0) if i == 1 else None, face_waypoint=i == 2)
-        assert np.linalg.norm(vehicle.pose().position - wp) < 0.6
+        assert np.linalg.norm(local(vehicle) - wp) < 0.6
         tel = link.telemetry()
-        assert np.linalg.norm(tel.position - wp) <= 0.5          # telemetry in the map frame, ENU
+        assert np.linalg.norm(tel.position - wp) <= 0.5          # telemetry in the autopilot's frame, ENU
         assert abs(tel.time - vehicle.time) < 1.0                 # stamped with the mission clock
         if i == 1:
             assert tel.yaw == pytest.approx(np.pi / 2, abs=0.05)  # looking at the point of interest, north
@@ -150,11 +158,11 @@ def test_refusals_are_reported_with_the_mav_result_name(vehicle, link):
         with pytest.raises(WaypointRefused, match="outside the geofence"):
             other.goto(80.0, 0.0, 12.0)
         with pytest.raises(WaypointRefused, match="altitude 150.0 m above home is outside"):
-            other.goto(0.0, 0.0, 152.0)
+            other.goto(0.0, 0.0, 150.0)  # home is 0 in the autopilot frame
         with pytest.raises(WaypointRefused, match="finite"):
             other.goto(0.0, float("nan"), 12.0)
     with pytest.raises(WaypointRefused, match="altitude 150.0 m above home is outside the limits"):
-        link.goto(0.0, 0.0, 152.0)  # without a fence (bench use) the config's altitude limits still hold
+        link.goto(0.0, 0.0, 150.0)  # without a fence (bench use) the config's altitude limits still hold
     time.sleep(0.3)
     assert np.array_equal(vehicle.vehicle.position_target, target)
 
@@ -202,7 +210,7 @@ def test_pilot_mode_change_pauses_until_handed_back(vehicle, link):
         flight.join(timeout=30.0)
         assert not flight.is_alive() and "goto" in result
         assert not link.paused and "control handed back (GUIDED); resuming" in link.events
-        assert np.linalg.norm(vehicle.pose().position - (120.0, 0.0, 17.0)) < 0.6
+        assert np.linalg.norm(local(vehicle) - (120.0, 0.0, 17.0)) < 0.6
     finally:
         pilot.close()
 
@@ -228,7 +236,7 @@ def test_link_loss_and_recovery(vehicle, link):
     wait_until(lambda: link.link_ok, 5.0, "the link to come back")
     assert any(e.startswith("link restored after") and e.endswith("resuming") for e in link.events)
     flight.join(timeout=40.0)
-    assert "goto" in result and np.linalg.norm(vehicle.pose().position - (150.0, 0.0, 17.0)) < 0.6
+    assert "goto" in result and np.linalg.norm(local(vehicle) - (150.0, 0.0, 17.0)) < 0.6
     assert vehicle.mode == "GUIDED" and vehicle.armed
 
 
@@ -301,7 +309,7 @@ def test_link_flies_through_mavproxy(vehicle):
             lk.arm()
             lk.takeoff(20.0)
             lk.goto(-30.0, 25.0, 22.0)
-            assert np.linalg.norm(vehicle.pose().position - (-30.0, 25.0, 22.0)) < 0.6
+            assert np.linalg.norm(local(vehicle) - (-30.0, 25.0, 22.0)) < 0.6
             assert vehicle.clients == 1       # the link reaches the vehicle only through MAVProxy
             lk.rtl()
             assert not vehicle.armed and np.hypot(*vehicle.pose().position[:2]) < 0.6
@@ -316,7 +324,7 @@ def test_command_line(vehicle, capsys):
     assert cli_main(["link", "--mavlink", url, "--tolerance", "0.5", "goto", "20", "-10", "15", "--yaw", "90"]) == 0
     out = capsys.readouterr().out
     assert "goto: done" in out and "GUIDED" in out
-    assert np.linalg.norm(vehicle.pose().position - (20.0, -10.0, 15.0)) < 0.6
+    assert np.linalg.norm(local(vehicle) - (20.0, -10.0, 15.0)) < 0.6
     assert vehicle.pose().yaw == pytest.approx(np.pi / 2, abs=0.05)
     assert cli_main(["link", "--mavlink", url, "land"]) == 0
     assert not vehicle.armed

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from layerpilot.config import ConfigError, from_dict
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import parse_url
-from layerpilot.link.frames import (attitude_enu_to_ned, attitude_ned_to_enu, enu_to_ned, ned_to_enu,
+from layerpilot.link.frames import (attitude_enu_to_ned, attitude_ned_to_enu, autopilot_enu_to_map, enu_to_ned,
+                                    local_ned_to_map, map_to_autopilot_enu, map_to_local_ned, ned_to_enu,
                                     yaw_enu_to_ned, yaw_ned_to_enu)
 from layerpilot.link.modes import ARDUPILOT, PX4, custom_mode_of, mode_name, result_name
 
@@ -42,6 +43,30 @@ def test_points_and_headings_by_hand():
 @given(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4), st.floats(-1e3, 1e3))
 def test_position_round_trip(x, y, z):
     assert ned_to_enu(*enu_to_ned(x, y, z)) == (x, y, z)
+
+
+def test_ekf_origin_offset_by_hand():
+    # ArduCopter's EKF origin is home on the ground; here home lies at (0, 0) on terrain 5.7 m above the map origin
+    origin = (0.0, 0.0, 5.7)
+    assert map_to_local_ned(0.0, 0.0, 5.7, origin) == (0.0, 0.0, 0.0)            # on the ground at home: z = 0
+    assert map_to_local_ned(10.0, 20.0, 35.7, origin) == pytest.approx((20.0, 10.0, -30.0))  # 30 m above home
+    assert local_ned_to_map(20.0, 10.0, -30.0, origin) == pytest.approx((10.0, 20.0, 35.7))
+    assert map_to_autopilot_enu(10.0, 20.0, 35.7, origin) == pytest.approx((10.0, 20.0, 30.0))
+    assert autopilot_enu_to_map(10.0, 20.0, 30.0, origin) == pytest.approx((10.0, 20.0, 35.7))
+    # without an offset the map origin is the EKF origin (a real autopilot's convention in layerpilot)
+    assert map_to_local_ned(10.0, 20.0, 30.0) == enu_to_ned(10.0, 20.0, 30.0)
+    assert local_ned_to_map(20.0, 10.0, -30.0, None) == ned_to_enu(20.0, 10.0, -30.0)
+
+
+@given(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4), st.floats(-1e3, 1e3),
+       st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3), st.floats(-1e2, 1e2)))
+def test_ekf_origin_round_trip_both_ways(x, y, z, origin):
+    assert local_ned_to_map(*map_to_local_ned(x, y, z, origin), origin) == pytest.approx((x, y, z), abs=1e-9)
+    assert map_to_local_ned(*local_ned_to_map(x, y, z, origin), origin) == pytest.approx((x, y, z), abs=1e-9)
+    assert autopilot_enu_to_map(*map_to_autopilot_enu(x, y, z, origin), origin) == pytest.approx((x, y, z),
+                                                                                                  abs=1e-9)
+    # the NED form is the ENU form with the axes swapped
+    assert map_to_local_ned(x, y, z, origin) == enu_to_ned(*map_to_autopilot_enu(x, y, z, origin))
 
 
 @given(st.floats(-1.4, 1.4), st.floats(-1.4, 1.4), st.floats(-3.1, 3.1))

@@ -153,13 +153,14 @@ def test_waypoints_outside_the_fence_never_reach_the_vehicle(vehicle):
         link.start_guided()
         link.arm()
         link.takeoff(20.0)
-        hover = tuple(round(c, 3) for c in enu_to_ned(0.0, 0.0, HOME_Z + 20.0))
+        # the link flies the autopilot's frame: its origin, the EKF origin, is home on the ground (HOME_Z in the world)
+        hover = tuple(round(c, 3) for c in enu_to_ned(0.0, 0.0, 20.0))
         target = vehicle.vehicle.position_target.copy()
         received = spy_on(vehicle)
         refused = [((150.0, 150.0, 45.0), "92.1 m outside the geofence"),     # the finding: 212 m from home
                    ((1e6, 1e6, 45.0), "outside the geofence"),
-                   ((0.0, 0.0, HOME_Z + 121.0), "altitude 121.0 m above home is outside"),
-                   ((0.0, 0.0, HOME_Z + 1.0), "altitude 1.0 m above home is outside")]
+                   ((0.0, 0.0, 121.0), "altitude 121.0 m above home is outside"),
+                   ((0.0, 0.0, 1.0), "altitude 1.0 m above home is outside")]
         for position, message in refused:
             with pytest.raises(WaypointRefused, match=message):
                 link.set_waypoint(*position)
@@ -175,7 +176,7 @@ def test_waypoints_outside_the_fence_never_reach_the_vehicle(vehicle):
         assert np.array_equal(vehicle.vehicle.position_target, target)
         assert np.linalg.norm(vehicle.pose().position - (0.0, 0.0, HOME_Z + 20.0)) < 0.6
         # inside (within the margin) is flown
-        link.goto(110.0, 0.0, HOME_Z + 30.0)
+        link.goto(110.0, 0.0, 30.0)
         assert np.linalg.norm(vehicle.pose().position - (110.0, 0.0, HOME_Z + 30.0)) < 0.6
         assert link.refused_total == 9
         # the worker checks every re-send: home moves 100 m down, the setpoint is now 130 m above it
@@ -218,7 +219,9 @@ def test_link_node_refuses_and_counts_an_outside_waypoint_over_zenoh(vehicle, tm
             wait_for(refused, "three refusals in the status line")
             assert lines[-1]["refused"] == {"outside the area": 2, "altitude": 1} and lines[-1]["waypoints"] == 0
             publish(outsider, key, msg.encode_waypoint(msg.Waypoint(2.0, "uav1", 9, np.array([30.0, 0.0, 32.0]))))
-            wait_for(lambda: np.linalg.norm(vehicle.pose().position - (30.0, 0.0, 32.0)) < 1.0, "the inside waypoint")
+            # flown in the autopilot's frame (origin: home on the ground, HOME_Z in the simulated world)
+            wait_for(lambda: np.linalg.norm(vehicle.pose().position - vehicle.ekf_origin - (30.0, 0.0, 32.0)) < 1.0,
+                     "the inside waypoint")
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err

@@ -10,7 +10,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.link.connection import open_connection
-from layerpilot.link.frames import enu_to_ned, yaw_enu_to_ned
+from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
 from layerpilot.link.relay import free_port
 from layerpilot.sim.geodesy import GeoOrigin
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
@@ -169,9 +169,13 @@ def test_telemetry_and_readiness(bench):
     assert bench.last("SYS_STATUS").onboard_control_sensors_health & mav.MAV_SYS_STATUS_PREARM_CHECK
     assert bench.last("GPS_RAW_INT").fix_type == 3
     local = bench.last("LOCAL_POSITION_NED")
-    assert (local.x, local.y, local.z) == (0.0, 0.0, -4.0)   # local NED origin is the map origin
+    assert (local.x, local.y, local.z) == (0.0, 0.0, 0.0)   # the EKF origin: on the ground at home, like ArduCopter
     home = bench.last("HOME_POSITION")
     assert home.altitude == int(round((GeoOrigin().alt + 4.0) * 1000))
+    assert (home.x, home.y, home.z) == (0.0, 0.0, 0.0)      # ArduPilot sends zeros there
+    origin = bench.last("GPS_GLOBAL_ORIGIN")
+    assert (origin.latitude, origin.longitude, origin.altitude) == (home.latitude, home.longitude, home.altitude)
+    assert bench.last("EKF_STATUS_REPORT").flags == 831
     # default 10 Hz position, 1 Hz heartbeat (mission time)
     assert sum(m.get_type() == "LOCAL_POSITION_NED" for m in got) in (19, 20, 21)
     assert sum(m.get_type() == "HEARTBEAT" for m in got) == 2
@@ -216,7 +220,8 @@ def test_guided_flight_with_type_masks_land_and_rtl(bench):
     assert bench.endpoint.pose().position[2] == pytest.approx(34.0, abs=0.05)   # 30 m above home at z=4
     assert bench.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0) == mav.MAV_RESULT_FAILED           # in flight
     # position-only local NED target, yaw given: east 40, north 10, 25 m up
-    n, e, d = enu_to_ned(40.0, 10.0, 25.0)
+    n, e, d = map_to_local_ned(40.0, 10.0, 25.0, bench.endpoint.ekf_origin)   # local NED is EKF-origin relative
+    assert (n, e, d) == (10.0, 40.0, -21.0)
     bench.client.mav.set_position_target_local_ned_send(0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b100111111000,
                                                         n, e, d, 0, 0, 0, 0, 0, 0, yaw_enu_to_ned(math.pi / 2), 0)
     bench.run(15.0)

@@ -13,6 +13,12 @@ take-off (connect, pre-arm, GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by t
 wall-clock waits and is not scored; when it is done the vehicle is placed exactly at the
 hover point (0, 0, altitude) at rest and the mission clock starts at 0 there. Two runs with
 the same mission are identical to the bit.
+
+Frames: the evaluator's map frame is the simulated world's (the decide behavior's altitude
+is a height in it); the vehicle's MAVLink local frame, like ArduCopter's, has its origin at
+the EKF origin on the ground at home, and the flight link speaks that frame. Every waypoint
+goes to the link through :func:`layerpilot.link.frames.map_to_autopilot_enu` with the
+endpoint's ``ekf_origin``.
 """
 
 from __future__ import annotations
@@ -114,6 +120,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     from layerpilot.decide import area_geometry, zone_mask
     from layerpilot.depth.source import GroundTruthDepth
     from layerpilot.layers import LayerContext, compute_layers
+    from layerpilot.link.frames import map_to_autopilot_enu
     from layerpilot.link.link import WaypointRefused
     from layerpilot.map import VoxelMap
     from layerpilot.mission.build import build_depth_service, build_pilot
@@ -147,7 +154,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             altitude = pilot.behavior.altitude
             _take_off(sim, link, altitude, pilot.cruise_speed or None)
             hover = np.array([home[0], home[1], altitude])
-            link.set_waypoint(*hover, yaw=0.0)
+            origin = sim.endpoint.ekf_origin  # the link flies the autopilot's frame: z = 0 on the ground at home
+            link.set_waypoint(*map_to_autopilot_enu(*hover, origin), yaw=0.0)
             sim.endpoint.step(ev.step_s)
             v = sim.vehicle
             v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover, 0.0, 0.0, 0.0, 0.0
@@ -175,7 +183,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                 if command is not None:
                     record = command.record()
                     try:
-                        link.set_waypoint(*command.position, yaw=command.yaw)
+                        link.set_waypoint(*map_to_autopilot_enu(*command.position, origin), yaw=command.yaw)
                     except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
                         record["refused"] = str(exc)
                         if link.refused[exc.kind] == 1:

@@ -48,7 +48,10 @@ class SimNode:
 
     def _on_frame(self, stamp: float, frame: CameraFrame) -> None:
         self.frames += 1
-        publish_frame(self.session, self.keys, self.frames, frame, self.publish_depth)
+        # the link node publishes the vehicle's pose in its MAVLink local frame (z = 0 on the ground at home,
+        # ArduCopter's EKF origin): the frames go out in that frame too, the mission's map frame
+        publish_frame(self.session, self.keys, self.frames, frame, self.publish_depth,
+                      float(self.sim.endpoint.ekf_origin[2]))
 
     def describe(self) -> dict:
         """What a user needs to connect: the MAVLink addresses actually served (port 0 = a free one), the world."""

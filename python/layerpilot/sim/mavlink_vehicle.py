@@ -6,9 +6,13 @@ at once, e.g. MAVProxy and a script) and UDP when configured. Runs in lock-step
 or as a real-time loop (``run_realtime()`` / ``start()`` in a thread, optionally
 faster than real time). ``pause_output()`` silences it for link-loss tests.
 
-Frames: the vehicle lives in the map frame (ENU, z up). Its MAVLink local NED
-origin is the map origin, which sits at the geodetic point ``origin``; home is
-where the vehicle starts. The ENU/NED conversion is here and in ``link/`` only.
+Frames: the vehicle lives in the map frame (ENU, z up), whose origin sits at the
+geodetic point ``origin`` (the world's datum). Home is where the vehicle starts, on
+the ground. Like ArduCopter and PX4, its MAVLink local NED frame has its origin at
+the EKF origin, set at the first good position on the ground at home: LOCAL_POSITION_NED
+reads z = 0 on the ground there and -30 at 30 m above it; ``ekf_origin`` is that point in
+the map frame. The ENU/NED conversion (and the EKF origin's offset) is here and in
+``link/`` only.
 
 Usage::
 
@@ -34,7 +38,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.config import check_range
 from layerpilot.link import modes
-from layerpilot.link.frames import enu_to_ned, ned_to_enu, yaw_enu_to_ned, yaw_ned_to_enu
+from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_ned, ned_to_enu, yaw_enu_to_ned,
+                                    yaw_ned_to_enu)
 from layerpilot.sim.geodesy import GeoOrigin
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.vehicle_transport import open_transport
@@ -58,7 +63,18 @@ DEFAULT_INTERVALS = {
     mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.1,
     mav.MAVLINK_MSG_ID_ATTITUDE: 0.1,
     mav.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+    mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: 5.0,
+    mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 1.0,   # ArduPilot only (its EXTRA3 stream); PX4 has none
 }
+
+# EKF_STATUS_REPORT flags, after ArduCopter's estimator: without GPS attitude, vertical velocity
+# and height in constant-position mode (0xA5 = 165); with a 3D fix and the origin set, attitude,
+# velocities, relative and absolute horizontal position, absolute height and the predicted
+# positions (0x33F = 831).
+EKF_FLAGS_NO_GPS = (mav.EKF_ATTITUDE | mav.EKF_VELOCITY_VERT | mav.EKF_POS_VERT_ABS | mav.EKF_CONST_POS_MODE)
+EKF_FLAGS_GOOD = (mav.EKF_ATTITUDE | mav.EKF_VELOCITY_HORIZ | mav.EKF_VELOCITY_VERT | mav.EKF_POS_HORIZ_REL
+                  | mav.EKF_POS_HORIZ_ABS | mav.EKF_POS_VERT_ABS | mav.EKF_PRED_POS_HORIZ_REL
+                  | mav.EKF_PRED_POS_HORIZ_ABS)
 
 _SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
             | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mav.MAV_SYS_STATUS_SENSOR_GPS
@@ -146,6 +162,8 @@ class MavlinkVehicle:
         self.output_paused = False
         self.time = 0.0
         self.home = self.vehicle.position.copy()
+        # the EKF origin: the first good position, on the ground at home (ArduCopter and PX4 alike)
+        self.ekf_origin = np.array([self.home[0], self.home[1], self.vehicle.ground_z], dtype=float)
         self.armed = False
         self.flavour = self.config.flavour
         self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
@@ -453,9 +471,10 @@ class MavlinkVehicle:
         elif frame not in (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED):
             self._text(mav.MAV_SEVERITY_WARNING, f"Unsupported setpoint frame {frame}")
             return None, None
-        position = ned_to_enu(n, e, d)
-        if frame != mav.MAV_FRAME_LOCAL_NED:
-            position = tuple(np.add(position, self.vehicle.position))
+        if frame == mav.MAV_FRAME_LOCAL_NED:
+            position = local_ned_to_map(n, e, d, self.ekf_origin)   # relative to the EKF origin
+        else:
+            position = tuple(np.add(ned_to_enu(n, e, d), self.vehicle.position))
         return position, ned_to_enu(vn, ve, vd)
 
     def _global_target(self, msg: mav.MAVLink_message) -> tuple[tuple | None, tuple | None]:
@@ -548,8 +567,10 @@ class MavlinkVehicle:
     def _send(self, msg_id: int) -> bool:
         """Send message ``msg_id`` now; False when there is nothing to say yet (no position estimate)."""
         if msg_id in (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
-                      mav.MAVLINK_MSG_ID_HOME_POSITION) and not self._has_fix():
-            return False  # like an EKF without GPS
+                      mav.MAVLINK_MSG_ID_HOME_POSITION, mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN) and not self._has_fix():
+            return False  # like an EKF without GPS: no origin, no home, no position yet
+        if msg_id == mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT and self.flavour != modes.ARDUPILOT:
+            return True   # an ArduPilot message; PX4 reports its estimator otherwise
         getattr(self, "_send_" + mav.mavlink_map[msg_id].msgname.lower())()
         return True
 
@@ -606,7 +627,7 @@ class MavlinkVehicle:
                                            int(vd * 100), hdg)
 
     def _send_local_position_ned(self) -> None:
-        n, e, d = enu_to_ned(*self.vehicle.position)
+        n, e, d = map_to_local_ned(*self.vehicle.position, self.ekf_origin)
         vn, ve, vd = enu_to_ned(*self.vehicle.velocity)
         self._mav.local_position_ned_send(self._boot_ms(), n, e, d, vn, ve, vd)
 
@@ -616,7 +637,22 @@ class MavlinkVehicle:
                                 -self.vehicle.yaw_rate)
 
     def _send_home_position(self) -> None:
+        """Home's latitude, longitude and altitude AMSL (the world's datum plus the terrain height under home);
+        its local position relative to the EKF origin, which is home on the ground: 0, 0, 0, what ArduPilot
+        always sends there (should a test move ``home``, the endpoint sends the offset, which ArduPilot would not)."""
         lat, lon, alt = self.config.origin.to_geodetic(*self.home)
-        n, e, d = enu_to_ned(*self.home)
+        n, e, d = map_to_local_ned(*self.home, self.ekf_origin)
         self._mav.home_position_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                     n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+                                     n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self.time * 1e6))
+
+    def _send_gps_global_origin(self) -> None:
+        """The EKF origin's latitude, longitude and altitude AMSL (the local NED frame's 0, 0, 0)."""
+        lat, lon, alt = self.config.origin.to_geodetic(*self.ekf_origin)
+        self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+                                         int(self.time * 1e6))
+
+    def _send_ekf_status_report(self) -> None:
+        if self._has_fix():
+            self._mav.ekf_status_report_send(EKF_FLAGS_GOOD, 0.02, 0.01, 0.01, 0.02, 0.0)
+        else:
+            self._mav.ekf_status_report_send(EKF_FLAGS_NO_GPS, 0.0, 0.0, 0.0, 0.02, 0.0)
