@@ -27,6 +27,7 @@ copies; images, depths and points are kept as given (no copy).
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -355,6 +356,12 @@ class CameraFrame:
     def project(self, points_map: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates (N, 2) and z-depth (N,) of map-frame points in this camera."""
         return self.intrinsics.project(self.pose.to_local(points_map))
+
+    def seen_from(self, origin: np.ndarray | tuple[float, float, float]) -> "CameraFrame":
+        """The same frame in a map frame whose origin lies at ``origin`` of this one (a translation:
+        the simulated world's frame -> an autopilot's local frame, zero on the ground at home)."""
+        shift = _vector(origin, "origin", 3)
+        return dataclasses.replace(self, pose=Pose(self.pose.position - shift, self.pose.orientation))
 
 
 # --- point cloud -----------------------------------------------------------------------------

@@ -14,11 +14,10 @@ wall-clock waits and is not scored; when it is done the vehicle is placed exactl
 hover point (0, 0, altitude) at rest and the mission clock starts at 0 there. Two runs with
 the same mission are identical to the bit.
 
-Frames: the evaluator's map frame is the simulated world's (the decide behavior's altitude
-is a height in it); the vehicle's MAVLink local frame, like ArduCopter's, has its origin at
-the EKF origin on the ground at home, and the flight link speaks that frame. Every waypoint
-goes to the link through :func:`layerpilot.link.frames.map_to_autopilot_enu` with the
-endpoint's ``ekf_origin``.
+Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin
+at the EKF origin on the ground at home (the decide behavior's altitude is a height above
+home). The simulator renders in its world's frame; the camera frames and the pilot's position
+are moved into the map frame by the endpoint's ``ekf_origin``, as the live sim node does.
 """
 
 from __future__ import annotations
@@ -77,7 +76,7 @@ def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
             link.wait_ready()
             link.start_guided()
             link.arm()
-            link.takeoff(altitude - float(sim.vehicle.ground_z))
+            link.takeoff(altitude)  # the link's frame: metres above home on the ground
             if cruise_speed is not None:
                 link.set_speed(cruise_speed)
         except BaseException as exc:  # reported in the mission thread
@@ -120,7 +119,6 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     from layerpilot.decide import area_geometry, zone_mask
     from layerpilot.depth.source import GroundTruthDepth
     from layerpilot.layers import LayerContext, compute_layers
-    from layerpilot.link.frames import map_to_autopilot_enu
     from layerpilot.link.link import WaypointRefused
     from layerpilot.map import VoxelMap
     from layerpilot.mission.build import build_depth_service, build_pilot
@@ -153,12 +151,12 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
         try:
             altitude = pilot.behavior.altitude
             _take_off(sim, link, altitude, pilot.cruise_speed or None)
+            origin = np.asarray(sim.endpoint.ekf_origin, float)  # the map frame's origin in the world
             hover = np.array([home[0], home[1], altitude])
-            origin = sim.endpoint.ekf_origin  # the link flies the autopilot's frame: z = 0 on the ground at home
-            link.set_waypoint(*map_to_autopilot_enu(*hover, origin), yaw=0.0)
+            link.set_waypoint(*hover, yaw=0.0)
             sim.endpoint.step(ev.step_s)
             v = sim.vehicle
-            v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover, 0.0, 0.0, 0.0, 0.0
+            v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + origin, 0.0, 0.0, 0.0, 0.0
             steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
             progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", progress_stream)
             next_frame = next_layers = t = 0.0
@@ -175,7 +173,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                     message = wire.encode_layer_set(wire.GridLayersMessage(
                         service.last_stamp, vehicle, cl.geometry, wire.column_arrays(cl, mission.map_server.layers)))
                     columns = wire.to_column_layers(wire.decode_layer_set(message))
-                position = sim.endpoint.pose().position.copy()
+                position = sim.endpoint.pose().position - origin  # in the map frame
                 evaluations = pilot.evaluations
                 command = pilot.step(position, t, columns)
                 if record_inputs and pilot.evaluations != evaluations:
@@ -183,7 +181,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                 if command is not None:
                     record = command.record()
                     try:
-                        link.set_waypoint(*map_to_autopilot_enu(*command.position, origin), yaw=command.yaw)
+                        link.set_waypoint(*command.position, yaw=command.yaw)
                     except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
                         record["refused"] = str(exc)
                         if link.refused[exc.kind] == 1:
@@ -192,9 +190,9 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                 if t >= next_frame - 1e-9:
                     next_frame += frame_period
                     pose = sim.endpoint.pose()
-                    frame = sim.renderer.render_vehicle(pose.position, pose.yaw, t)
+                    frame = sim.renderer.render_vehicle(pose.position, pose.yaw, t).seen_from(origin)
                     frames += 1
-                    path.append((float(pose.position[0]), float(pose.position[1])))
+                    path.append(tuple(float(c) for c in (pose.position - origin)[:2]))
                     if (cloud := depth.push(frame)) is not None:
                         service.insert(cloud.points, cloud.origin, cloud.colors, t, mission.depth.max_depth)
                     if (reference := truth.push(frame)) is not None and len(reference):

@@ -30,8 +30,7 @@ def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, frame: CameraF
 
     ``lift``: metres the world's frame lies above the map frame (subtracted from the camera position).
     """
-    pose = Pose(frame.pose.position - np.array([0.0, 0.0, lift]), frame.pose.orientation) if lift else frame.pose
-    frame = dataclasses.replace(frame, pose=pose, depth=frame.depth if with_depth else None)
+    frame = dataclasses.replace(frame.seen_from((0.0, 0.0, lift)), depth=frame.depth if with_depth else None)
     publish(session, k.camera, encode_frame(FrameMessage(k.vehicle, seq, frame)))
 
 
