@@ -13,6 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
@@ -27,6 +28,7 @@ from conftest import free_tcp_port, operator_session, start_up, stop_up
 from test_bus_fuzz import GOOD, mutations
 
 K = Keys("uav1")
+BLOCK = zenoh.CongestionControl.BLOCK
 MEMORY_BOUND_MB = 300  # per node: the largest valid messages (1 M-point clouds, 12.6 MP frames) in full queues
 rng = np.random.default_rng(5)
 
@@ -163,12 +165,12 @@ height = 120
         for key, decode in malformed.items():
             session = sessions[owner[key]]
             for payload in mutations(GOOD[decode], 1500):
-                session.put(key, payload)
+                session.put(key, payload, congestion_control=BLOCK)  # delivered, not dropped by the transport
                 sent += 1
         for key, payloads in hostile_payloads().items():
             session = sessions[owner.get(key, "depth-uav1")]
             for payload in payloads:
-                session.put(key, payload)
+                session.put(key, payload, congestion_control=BLOCK)
                 sent += 1
         assert sent >= 10_000
 
