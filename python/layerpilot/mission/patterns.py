@@ -1,9 +1,10 @@
-"""Scripted baselines: lawnmower and orbit waypoints over a circular area of interest.
+"""Scripted patterns: lawnmower and orbit waypoints over a circular area of interest.
 
 Both return waypoints as a float64 array (N, 4) of ``x, y, z, yaw`` in the map
 frame (ENU metres; yaw in radians counter-clockwise from east, the heading the
 vehicle, and so the camera, should hold on the way to that waypoint). They are
-flown through the same MAVLink path as the decision maker's waypoints.
+flown by the mission core's ``Pilot``, through the same MAVLink path as the decision
+maker's waypoints, live and in lock-step.
 """
 
 from __future__ import annotations
