@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -43,7 +45,7 @@ def test_arrival_is_horizontal_and_counts_each_target_once() -> None:
 def test_no_layers_no_decision_but_a_pattern_needs_none() -> None:
     pilot = Pilot(PilotConfig(), behavior_from_dict(fringe_behavior()))
     assert pilot.step((0.0, 0.0, 50.0), 0.0, None) is None
-    mission = Mission().replace(decide=PilotConfig(behavior="orbit"))
+    mission = dataclasses.replace(Mission(), decide=PilotConfig(behavior="orbit"))
     orbit = build_pilot(mission)
     seen = []
     position = (0.0, 0.0, 50.0)
@@ -58,7 +60,7 @@ def test_no_layers_no_decision_but_a_pattern_needs_none() -> None:
 
 def test_lawnmower_flies_at_the_survey_speed_of_the_missions_camera() -> None:
     def pilot(rate: float) -> Pilot:
-        return build_pilot(Mission().replace(decide=PilotConfig(behavior="lawnmower"),
+        return build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior="lawnmower"),
                                              sim=SimConfig(frame_rate_hz=rate)))
 
     slow, fast = pilot(1.0), pilot(2.0)

@@ -52,6 +52,12 @@ def column_arrays(cl: ColumnLayers, names: tuple[str, ...] | None = None) -> dic
     return {n: getattr(cl, n) for n in names}
 
 
+def encode_columns(cl: ColumnLayers, stamp: float, vehicle: str, names: tuple[str, ...] | None = None) -> bytes:
+    """A map's column layers as the map server publishes them (the one encoder of the live node and the
+    lock-step evaluator, so both drivers' pilots read the same bytes)."""
+    return encode_layer_set(GridLayersMessage(stamp, vehicle, cl.geometry, column_arrays(cl, names)))
+
+
 def _quantize(m: pb.Layer, arr: np.ndarray, enc: int) -> None:
     qt = _QUANT[enc]
     top = int(np.iinfo(qt).max)

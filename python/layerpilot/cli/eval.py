@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import warnings
 from pathlib import Path
@@ -110,7 +111,7 @@ def _study(args: argparse.Namespace) -> None:
 
     from layerpilot.eval.summary import write_study_report
     from layerpilot.mission.config import to_settings
-    from layerpilot.mission.pilot import PATTERNS, PilotConfig
+    from layerpilot.mission.pilot import PATTERNS
     from layerpilot.progress import Progress
 
     if args.quick:
@@ -124,8 +125,9 @@ def _study(args: argparse.Namespace) -> None:
     for behavior in ev.behaviors:
         # Scripted patterns have no decision noise: one run stands for every seed.
         for seed in range(1 if behavior in PATTERNS else ev.seeds):
-            decide = PilotConfig(**{**mission.decide.__dict__, "behavior": behavior, "seed": seed})
-            jobs.append((behavior, mission.replace(decide=decide), str(out / "runs" / f"{Path(behavior).stem}-s{seed}")))
+            decide = dataclasses.replace(mission.decide, behavior=behavior, seed=seed)
+            run = dataclasses.replace(mission, decide=decide)
+            jobs.append((behavior, run, str(out / "runs" / f"{Path(behavior).stem}-s{seed}")))
     runs: dict[str, list[str]] = {b: [] for b in ev.behaviors}
     finals: dict[str, list[dict[str, float]]] = {b: [] for b in ev.behaviors}
     progress = Progress(len(jobs), f"study ({len(jobs)} missions, {args.jobs} at a time)", " runs")

@@ -169,9 +169,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             while True:
                 if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec
                     next_layers += layer_period
-                    cl = service.columns()
-                    message = wire.encode_layer_set(wire.GridLayersMessage(
-                        service.last_stamp, vehicle, cl.geometry, wire.column_arrays(cl, mission.map_server.layers)))
+                    message = wire.encode_columns(service.columns(), service.last_stamp, vehicle,
+                                                  mission.map_server.layers)
                     columns = wire.to_column_layers(wire.decode_layer_set(message))
                 position = sim.endpoint.pose().position - origin  # in the map frame
                 evaluations = pilot.evaluations

@@ -93,9 +93,6 @@ class Mission:
     def mavlink_url(self, vehicle: str) -> str:
         return f"tcp:127.0.0.1:{self.mavlink_port + 10 * self.vehicles.index(vehicle)}"
 
-    def replace(self, **sections: Any) -> "Mission":
-        return dataclasses.replace(self, **sections)
-
 
 @dataclass(frozen=True)
 class Override:

@@ -49,8 +49,7 @@ class PilotConfig:
 
 def load_pilot_behavior(name: str) -> Behavior:
     """The behavior a pilot flies; a pattern flies the balanced preset's area and altitude."""
-    behavior = load_behavior("balanced" if name in PATTERNS else name)
-    return behavior
+    return load_behavior("balanced" if name in PATTERNS else name)
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ import zenoh
 
 from layerpilot.bus import arrays, keys
 from layerpilot.bus.guard import guarded, query_params
-from layerpilot.bus.layerset import GridLayersMessage, column_arrays, encode_layer_set
+from layerpilot.bus.layerset import encode_columns
 from layerpilot.bus.messages import CloudMessage, decode_cloud
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
@@ -106,8 +106,7 @@ class MapServer:
     def layer_set(self, vehicle: str, x: float | None = None, y: float | None = None, w: int | None = None,
                   h: int | None = None, names: tuple[str, ...] | None = None) -> bytes:
         cl = self.service.columns(x, y, w, h)
-        return encode_layer_set(GridLayersMessage(self.service.last_stamp, vehicle, cl.geometry,
-                                                  column_arrays(cl, names or self.cfg.layers)))
+        return encode_columns(cl, self.service.last_stamp, vehicle, names or self.cfg.layers)
 
     def _publish_due(self) -> bool:
         """A layer set per mission vehicle every 1 / layers_rate s (the transport's pacing: wall clock).
