@@ -68,7 +68,8 @@ def mission_from_args(args: argparse.Namespace, flags: dict[str, str | tuple[str
     """The mission file (``--config``) with every given flag in ``flags`` (dest -> mission key, or a
     tuple of keys the flag sets together) applied.
 
-    ``extra``: more Overrides (a flag that sets several keys). A bad flag value is an error naming
+    ``extra``: more Overrides, for a flag whose value is split over several keys (``--camera WxH``).
+    A bad flag value is an error naming
     the flag (``--rate must be in [0.01, 100.0], got 0.0``).
     """
     from layerpilot.mission.config import Override, load_mission

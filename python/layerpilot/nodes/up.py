@@ -26,6 +26,7 @@ MAX_RESTART_DELAY = 30.0  # s
 HEALTHY_AFTER = 60.0  # s alive: the node's failures in a row start over
 MAX_FAILURES = 5  # failures in a row after which a node is reported failed and left down
 CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
+SILENT_AFTER = 30.0  # s without a status line (nodes print one every 2 s): the whole process is stuck
 STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL (links first, then the rest: see Supervisor.stop)
 
 
@@ -39,7 +40,6 @@ class NodeProcess:
     restarts: int = 0
     status: dict = field(default_factory=dict)
     started: float = 0.0
-    exit_codes: list[int] = field(default_factory=list)
     failures_in_a_row: int = 0
     restart_at: float = 0.0  # monotonic time of the next restart (backoff)
     failed: str = ""  # set once the node is given up on: its last error line
@@ -105,10 +105,9 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
 
 
 class Supervisor:
-    def __init__(self, nodes: list[NodeProcess], log_dir: Path, silent_after: float = 30.0) -> None:
+    def __init__(self, nodes: list[NodeProcess], log_dir: Path) -> None:
         self.nodes = nodes
         self.log_dir = log_dir
-        self.silent_after = silent_after  # s without a status line: the whole process is stuck
         self.stopping = threading.Event()
 
     def start(self) -> None:
@@ -120,7 +119,7 @@ class Supervisor:
         events = []
         now = time.monotonic()
         for n in self.nodes:
-            if n.alive() and now - n.heard_at > self.silent_after and not self.stopping.is_set():
+            if n.alive() and now - n.heard_at > SILENT_AFTER and not self.stopping.is_set():
                 events.append(f"{n.name} STALLED: no status line for {now - n.heard_at:.0f} s; killing it")
                 n.proc.kill()
                 n.proc.wait()
@@ -128,7 +127,6 @@ class Supervisor:
                 continue
             if n.restart_at == 0.0:  # just found dead
                 code = n.proc.returncode
-                n.exit_codes.append(code)
                 n.failures_in_a_row = 1 if now - n.started >= HEALTHY_AFTER else n.failures_in_a_row + 1
                 error = n.last_error()
                 if n.failures_in_a_row >= MAX_FAILURES:
@@ -190,8 +188,7 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
         session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets), Path(log_dir),
-                     silent_after=max(30.0, 5 * status_every))
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets), Path(log_dir))
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/", flush=True)
