@@ -22,7 +22,10 @@ K = Keys("uav1")
 
 def test_mission_flies_an_outside_autopilot_with_layerpilots_world_as_camera(tmp_path):
     # the stand-in for SITL: its own process clock, flat ground at 0, serving MAVLink on a free port
-    sitl = MavlinkVehicle(Multicopter(), "tcp:127.0.0.1:0", EndpointConfig(flavour="px4")).start(speed=3.0)
+    # its clock runs 3x real time, so the link's 5 Hz (wall) setpoint stream is 1.7 Hz of its time: PX4's
+    # "stream faster than 2 Hz before OFFBOARD" becomes 2 / 3 Hz here, or OFFBOARD is refused at random
+    sitl = MavlinkVehicle(Multicopter(), "tcp:127.0.0.1:0",
+                          EndpointConfig(flavour="px4", offboard_min_rate_hz=2.0 / 3.0)).start(speed=3.0)
     ep = free_endpoint()
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
