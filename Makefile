@@ -2,7 +2,8 @@
 SHELL := /bin/bash
 APT_PACKAGES := g++ make cmake git python3 python3-venv python3-dev \
   liboctomap-dev libeigen3-dev octomap-tools protobuf-compiler \
-  libegl1 libegl-mesa0 libgl1-mesa-dri
+  libegl1 libegl-mesa0 libgl1-mesa-dri \
+  chromium gdal-bin
 VENV := .venv
 PY := $(VENV)/bin/python
 SOURCES := pyproject.toml CMakeLists.txt $(wildcard cpp/*) $(wildcard proto/*) $(wildcard config/*/*)
