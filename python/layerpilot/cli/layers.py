@@ -1,4 +1,4 @@
-"""Layer and decision commands: `layerpilot layers render|list`."""
+"""Layer and decision commands: `layerpilot layers render|list|export`."""
 
 from __future__ import annotations
 
@@ -21,6 +21,14 @@ def register(commands: argparse._SubParsersAction) -> None:
     ls = sub.add_parser("list", help="registered layer names (after importing a behavior's plugins)")
     ls.add_argument("--behavior", help="also load this behavior's plugins")
     ls.set_defaults(func=_list)
+    ex = sub.add_parser("export", help="GeoTIFFs of the color, elevation and decision layers of a run's map (for QGIS)")
+    ex.add_argument("run", type=Path, help="run directory (its map.ot or map.bt) or a .ot/.bt map file")
+    ex.add_argument("--origin", type=float, nargs=3, metavar=("LAT", "LON", "ALT"),
+                    help="the map frame's geodetic origin (default: the run directory's frame.json)")
+    ex.add_argument("--layer", action="append", dest="layers", metavar="NAME",
+                    help="decision layer to export (repeatable; default: fringe, time, distance, elevation)")
+    ex.add_argument("--out", type=Path, help="output folder (default: <run directory>/geotiff)")
+    ex.set_defaults(func=_export)
 
 
 def _render(args: argparse.Namespace) -> None:
@@ -39,3 +47,16 @@ def _list(args: argparse.Namespace) -> None:
 
         load_behavior(args.behavior)
     print("\n".join(layer_names()))
+
+
+def _export(args: argparse.Namespace) -> None:
+    from layerpilot.eval.geotiff import MAP_LAYERS, export_layers
+    from layerpilot.eval.run_frame import read_run_frame, run_map_path
+    from layerpilot.map import VoxelMap
+
+    map_path, run_dir = run_map_path(args.run)
+    frame = read_run_frame(run_dir, args.origin)
+    out = args.out or (run_dir or map_path.parent) / "geotiff"
+    for path in export_layers(VoxelMap.load(map_path), frame, out, args.layers or MAP_LAYERS):
+        print(f"wrote {path}")
+    print(f"CRS: {frame.crs.name} (transverse Mercator on WGS 84; UTM zone EPSG:{frame.utm_crs.to_epsg()})")
