@@ -81,7 +81,7 @@ def test_band_values_are_the_maps(exported):
     distance = gdalinfo(out / "layer_distance.tif")["bands"][0]  # closest view / 100 m: 40 m below the camera
     assert distance["minimum"] == pytest.approx(float(columns.min_distance.min()) / 100, abs=6e-4)  # gdalinfo prints 3 decimals
     assert distance["maximum"] == pytest.approx(float(columns.min_distance.max()) / 100, abs=6e-4)  # gdalinfo prints 3 decimals
-    assert 0.39 < distance["minimum"] < distance["maximum"] < 0.45
+    assert 0.39 < distance["minimum"] < distance["maximum"] < 0.5  # corners: 47-50 m away
 
 
 def test_a_map_without_a_place_gets_a_clear_error(tmp_path, capsys):
