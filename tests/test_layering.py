@@ -20,8 +20,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "python" / "layerpilot"
 
 # Top to bottom; a package may import only the rows below its own.
-ROWS = [{"cli"}, {"bench"}, {"eval"}, {"nodes"}, {"mission"}, {"bus"}, {"decide", "depth", "sim"},
-        {"layers", "link"}, {"map"}, {"grid", "config", "progress", "geometry"}]
+ROWS = [{"cli"}, {"bench"}, {"eval"}, {"viz"}, {"nodes"}, {"mission"}, {"bus"}, {"photos"},
+        {"decide", "depth", "sim"}, {"layers", "link"}, {"map"},
+        {"grid", "config", "progress", "geometry", "geodesy"}]
 
 
 def _contracts() -> dict[str, dict]:
