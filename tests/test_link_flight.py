@@ -18,7 +18,8 @@ from layerpilot.cli import main as cli_main
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.geofence import Geofence
-from layerpilot.link.link import CommandRejected, FlightLink, LinkError, LinkLost, NotReady, WaypointRefused
+from layerpilot.link.link import (CommandRejected, ControlLost, FlightLink, LinkError, LinkLost, NotReady,
+                                  WaypointRefused)
 from layerpilot.link.relay import MavProxyRelay, free_port
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
@@ -191,25 +192,33 @@ def test_pilot_mode_change_pauses_until_handed_back(vehicle, link):
     pilot = open_connection(url_of(vehicle), 255, 190)       # a ground station on the same vehicle
     try:
         result: dict = {}
-        flight = threading.Thread(target=lambda: result.setdefault("goto", link.goto(120.0, 0.0, 17.0)))
+
+        def fly() -> None:
+            try:
+                link.goto(120.0, 0.0, 17.0)
+            except ControlLost as exc:
+                result["goto"] = exc
+
+        flight = threading.Thread(target=fly)
         flight.start()
         wait_until(lambda: vehicle.pose().position[0] > 20.0, 20.0, "the flight to start")
         pilot.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                                     5, 0, 0, 0, 0, 0)                         # pilot: LOITER
         wait_until(lambda: link.paused, 5.0, "the link to pause")
         assert any(e.startswith("pilot took over: mode LOITER") for e in link.events)
+        flight.join(timeout=5.0)  # the goto's wait ends at once with the takeover (issue 14 item 3)
+        assert not flight.is_alive() and result["goto"].kind == "takeover"
         with pytest.raises(LinkError, match="paused"):
             link.set_waypoint(0.0, 0.0, 17.0)
         time.sleep(1.0)
         x_paused = vehicle.pose().position[0]
         time.sleep(1.0)                                                    # 5 s of mission time
         assert abs(vehicle.pose().position[0] - x_paused) < 0.2 and vehicle.mode == "LOITER"
-        assert flight.is_alive()                                           # goto waits, it does not arrive
         pilot.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                                     4, 0, 0, 0, 0, 0)                         # handed back: GUIDED
-        flight.join(timeout=30.0)
-        assert not flight.is_alive() and "goto" in result
-        assert not link.paused and "control handed back (GUIDED); resuming" in link.events
+        wait_until(lambda: not link.paused, 5.0, "control handed back")
+        assert "control handed back (GUIDED); resuming" in link.events
+        link.goto(120.0, 0.0, 17.0)                                        # and the link flies on
         assert np.linalg.norm(local(vehicle) - (120.0, 0.0, 17.0)) < 0.6
     finally:
         pilot.close()

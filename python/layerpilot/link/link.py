@@ -19,7 +19,13 @@ Failsafes:
   * a rejected COMMAND_ACK raises :class:`CommandRejected` naming the MAV_RESULT
     (and is reported even when nobody waits for it);
   * a mode change away from GUIDED/OFFBOARD made by someone else pauses the link
-    until that mode is handed back.
+    until that mode is handed back (a pilot takeover);
+  * a reboot of the autopilot (its uptime, time_boot_ms, going backwards) is reported as
+    such, never as a takeover: the link lets go of the vehicle (``reboots`` counts them);
+    a disarm while the link flies is reported after ``REBOOT_GRACE_S`` unless it was a reboot.
+Every wait (arrival, takeoff, readiness, the end action's acknowledgement) ends at once
+with :class:`ControlLost` (``kind``: ``takeover``, ``disarmed`` or ``reboot``) when one
+of these happens while it runs.
 Every report goes to ``events`` (a list of strings), the ``on_event`` callback and
 the ``layerpilot.link`` logger.
 """
@@ -54,6 +60,9 @@ READY_REPORT_S = 15.0               # while waiting for readiness, say what is s
 END_ACTIONS = {"rtl": "RTL", "land": "LAND", "loiter": "LOITER"}  # mission end action -> the mode it puts
 # ArduPilot's EKF_STATUS_REPORT flags: a horizontal position (absolute or relative) and not uninitialised
 EKF_POSITION = mav.EKF_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_REL
+REBOOT_BACKSTEP_S = 1.0  # the autopilot's uptime went back by more than this: it rebooted
+REBOOT_GRACE_S = 0.3     # a disarm waits this long for the reboot that may explain it (same burst)
+UPTIME_MESSAGES = ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME")  # time_boot_ms
 
 
 class LinkError(RuntimeError):
@@ -79,6 +88,15 @@ class CommandRejected(LinkError):
         self.command, self.result = command, result
         self.result_name = modes.result_name(result)
         super().__init__(f"{modes.command_name(command)} rejected: {self.result_name}{detail}")
+
+
+class ControlLost(LinkError):
+    """A wait ended because the vehicle was taken over, disarmed or rebooted; ``kind`` says which
+    (``takeover``, ``disarmed``, ``reboot``)."""
+
+    def __init__(self, message: str, kind: str) -> None:
+        super().__init__(message)
+        self.kind = kind
 
 
 class WaypointRefused(LinkError, ValueError):
@@ -140,6 +158,11 @@ class FlightLink:
         self._stream_hold = False   # PX4: stream the current position (pre-arm, takeoff prep, pause)
         self._long_loss_command: int | None = None
         self._abandoned = ""        # why the current waypoint was dropped (long loss, land/RTL requested)
+        self.upsets: list[tuple[str, str]] = []  # (kind, what happened): takeovers, disarms, reboots
+        self.reboots = 0
+        self._uptime = -math.inf    # the autopilot's newest time_boot_ms (s): a step back is a reboot
+        self._disarmed_at: float | None = None  # an unexplained disarm, reported after REBOOT_GRACE_S
+        self._rebooted = False      # the worker re-requests the streams a reboot forgot
         self._thread = threading.Thread(target=self._loop, name="flight-link", daemon=True)
         self._thread.start()
 
@@ -234,8 +257,10 @@ class FlightLink:
         deadline = start + timeout
         next_home_request = 0.0
         next_report = start + READY_REPORT_S
+        upsets = len(self.upsets)
         while self.missing():
             self._check_interrupted("waiting for the autopilot to be ready")
+            self._check_upsets(upsets, "waiting for the autopilot to be ready")
             now = time.monotonic()
             if now >= deadline:
                 missing = self.missing()
@@ -289,14 +314,20 @@ class FlightLink:
         with self._cond:
             self._waited.add(command)
             self._acks.pop(command, None)
-        result, tries = None, 0
+        result, tries, upsets = None, 0, len(self.upsets)
+
+        def reboot() -> str:  # what a reboot during this wait said ("" if none): the wait ends at once
+            return next((text for kind, text in self.upsets[upsets:] if kind == "reboot"), "")
+
         try:
             while result is None and time.monotonic() < deadline and self._link_ok and not self._stop.is_set():
                 self._command_long(command, *params, confirmation=tries)
                 tries += 1
                 left = min(self.config.command_timeout_s, deadline - time.monotonic())
-                if self._wait(lambda: self._acks.get(command, mav.MAV_RESULT_IN_PROGRESS)
+                if self._wait(lambda: reboot() or self._acks.get(command, mav.MAV_RESULT_IN_PROGRESS)
                               != mav.MAV_RESULT_IN_PROGRESS, left):
+                    if reboot():
+                        return self._ended(False, f"{what} not acknowledged: {reboot()}")
                     result = self._acks[command]
         finally:
             with self._cond:
@@ -306,9 +337,11 @@ class FlightLink:
             return self._ended(False, f"{what} not acknowledged: {why}")
         if result != mav.MAV_RESULT_ACCEPTED:
             return self._ended(False, f"{what} rejected: {modes.result_name(result)}")
-        if not self._wait(lambda: self._mode == what, max(0.0, deadline - time.monotonic())):
+        if not self._wait(lambda: self._mode == what or reboot(), max(0.0, deadline - time.monotonic())):
             return self._ended(False, f"{what} accepted (COMMAND_ACK) but the HEARTBEAT still says mode "
                                       f"{self._mode} after {timeout:.1f} s")
+        if reboot():
+            return self._ended(False, f"{what} accepted, then {reboot()}")
         return self._ended(True, f"{what} acknowledged (COMMAND_ACK accepted, mode {what})")
 
     def _ended(self, ok: bool, text: str) -> tuple[bool, str]:
@@ -318,6 +351,14 @@ class FlightLink:
     def _check_interrupted(self, doing: str) -> None:
         if self._interrupted.is_set():
             raise LinkError(f"interrupted while {doing}")
+
+    def _check_upsets(self, since: int, doing: str) -> None:
+        """:class:`ControlLost` if a takeover, disarm or reboot happened after upset number ``since``
+        (a reboot names itself even when the disarm it caused came first)."""
+        new = self.upsets[since:]
+        if new:
+            kind, text = next((u for u in new if u[0] == "reboot"), new[-1])
+            raise ControlLost(f"{doing}: {text}", kind)
 
     def start_guided(self) -> None:
         """Take control: GUIDED on ArduPilot; on PX4 stream setpoints for ``offboard_prestream_s`` then OFFBOARD."""
@@ -360,10 +401,11 @@ class FlightLink:
         home = self._home_or_error()
         check = self._check_waypoint(self._position[0], self._position[1], home[2] + altitude)
         if self.flavour == modes.ARDUPILOT:
+            upsets = len(self.upsets)
             self.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, altitude)
             target = check
             timeout = timeout if timeout is not None else 30.0 + 2.0 * altitude
-            if not self._wait_arrival(target, timeout, use_setpoint=False):
+            if not self._wait_arrival(target, timeout, use_setpoint=False, upsets=upsets, doing="takeoff"):
                 raise LinkError(f"takeoff: did not reach {altitude:.1f} m within {timeout:.1f} s")
             self._set_setpoint(target, None, None, False)
         else:
@@ -400,13 +442,15 @@ class FlightLink:
              timeout: float | None = None) -> None:
         """Fly to map-frame (x, y, z) and return once within the tolerance for ``arrival_hold_s``.
 
-        Waits out link losses and pilot pauses (they do not count as arrival); raises
-        LinkLost when the link came back after a long loss and the configured action was taken.
+        Waits out link losses (they do not count as arrival); raises LinkLost when the link came
+        back after a long loss and the configured action was taken, and :class:`ControlLost` at
+        once when the pilot takes over, the vehicle disarms or the autopilot reboots.
         """
+        upsets = len(self.upsets)
         target = self.set_waypoint(x, y, z, yaw, look_at, face_waypoint)
         if timeout is None:
             timeout = 60.0 + 3.0 * float(np.linalg.norm(target - self._position))
-        if not self._wait_arrival(target, timeout, use_setpoint=True):
+        if not self._wait_arrival(target, timeout, use_setpoint=True, upsets=upsets, doing="goto"):
             raise LinkError(f"goto: did not arrive at ({x:.1f}, {y:.1f}, {z:.1f}) within {timeout:.1f} s "
                             f"(now at {np.round(self._position, 1).tolist()})")
 
@@ -526,14 +570,16 @@ class FlightLink:
             self._stream_hold, self._abandoned = False, ""
         self._send_setpoint()
 
-    def _wait_arrival(self, target: np.ndarray, timeout: float, use_setpoint: bool) -> bool:
-        """True once within tolerance for arrival_hold_s with the link up and not paused."""
+    def _wait_arrival(self, target: np.ndarray, timeout: float, use_setpoint: bool, upsets: int, doing: str) -> bool:
+        """True once within tolerance for arrival_hold_s with the link up and not paused; ControlLost
+        as soon as an upset after number ``upsets`` (takeover, disarm, reboot) is known."""
         deadline = time.monotonic() + timeout
         since: float | None = None
         while time.monotonic() < deadline:
             if self._stop.is_set():
                 raise LinkError("link closed")
             self._check_interrupted("flying to a waypoint")
+            self._check_upsets(upsets, doing)
             if use_setpoint and self._abandoned:
                 raise LinkLost(f"waypoint abandoned: {self._abandoned}") if "link loss" in self._abandoned \
                     else LinkError(f"waypoint abandoned: {self._abandoned}")
@@ -612,6 +658,10 @@ class FlightLink:
                 self._transmit(lambda m: m.heartbeat_send(mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID,
                                                           0, 0, mav.MAV_STATE_ACTIVE))
             self._check_link(now)
+            self._check_disarm(now)
+            if self._rebooted:
+                self._rebooted = False
+                self._request_streams()  # a rebooted autopilot forgot the message intervals asked of it
             if now >= next_setpoint:
                 next_setpoint = now + self.config.setpoint_period_s
                 self._send_setpoint()
@@ -660,6 +710,35 @@ class FlightLink:
             self._report(f"link lost: no HEARTBEAT for {self.config.heartbeat_timeout_s:.1f} s; "
                          "no new waypoints until it returns")
 
+    def _check_disarm(self, now: float) -> None:
+        """A disarm while the link flies, reported once no reboot explained it within REBOOT_GRACE_S."""
+        with self._cond:
+            if self._disarmed_at is None or now - self._disarmed_at < REBOOT_GRACE_S:
+                return
+            self._disarmed_at = None
+            text = f"the vehicle disarmed while the link was flying it (mode {self._mode}); waypoint abandoned"
+            self._let_go("disarmed", text)
+        self._report(text)
+
+    def _let_go(self, kind: str, text: str) -> None:
+        """(``_cond`` held) Record an upset and stop flying the vehicle: no setpoint, not in control."""
+        self._in_control, self._paused, self._setpoint, self._stream_hold = False, False, None, False
+        self._abandoned = text
+        self.upsets.append((kind, text))
+        self._cond.notify_all()
+
+    def _on_reboot(self, uptime: float) -> str:
+        """(``_cond`` held) The autopilot restarted: let go, forget what it must tell again (home, position)."""
+        self.reboots += 1
+        self._disarmed_at = None
+        text = (f"autopilot rebooted: its uptime went back from {self._uptime:.1f} s to {uptime:.1f} s; "
+                f"{'ARMED' if self._armed else 'disarmed'} in {self._mode}"
+                + ("; the link let go of the vehicle" if self._in_control else ""))
+        self._let_go("reboot", text)
+        self._home, self._position_at, self._ekf_flags, self._prearm_ok = None, -math.inf, None, False
+        self._rebooted = True
+        return text
+
     def _on_message(self, msg) -> None:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
@@ -667,7 +746,13 @@ class FlightLink:
             return
         if msg.get_srcSystem() != self.target_system or msg.get_srcComponent() != self.target_component:
             return
+        rebooted = ""
         with self._cond:
+            if kind in UPTIME_MESSAGES:
+                uptime = msg.time_boot_ms / 1000.0
+                if uptime < self._uptime - REBOOT_BACKSTEP_S:
+                    rebooted = self._on_reboot(uptime)
+                self._uptime = uptime
             if kind == "LOCAL_POSITION_NED":
                 self._position = np.array(ned_to_enu(msg.x, msg.y, msg.z))
                 self._velocity = np.array(ned_to_enu(msg.vx, msg.vy, msg.vz))
@@ -701,6 +786,8 @@ class FlightLink:
                 self._texts = self._texts[-19:] + [msg.text]
                 log.info("autopilot: %s", msg.text)
             self._cond.notify_all()
+        if rebooted:
+            self._report(rebooted)
 
     def _on_heartbeat(self, msg) -> None:
         flavour = modes.flavour_of(msg.autopilot)
@@ -718,17 +805,20 @@ class FlightLink:
         reports = []
         with self._cond:
             self._last_heartbeat = time.monotonic()
-            self._armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            was_armed, self._armed = self._armed, bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
             old, self._mode = self._mode, modes.mode_name(self.flavour, msg.custom_mode)
             restored = not self._link_ok
             self._link_ok = True
             guided = modes.GUIDED_MODE[self.flavour]
             if restored and self._lost_at:
                 reports += self._on_restored()
-            if self._in_control and not self._paused and self._mode != guided and old == guided:
+            if was_armed and not self._armed and self._in_control:
+                self._disarmed_at = time.monotonic()  # a reboot, or a disarm: _check_disarm tells after a grace
+            elif self._in_control and not self._paused and self._mode != guided and old == guided:
                 if not (restored and self.flavour == modes.PX4 and self._mode == modes.HOLD_MODE[modes.PX4]):
                     self._paused = True
                     reports.append(f"pilot took over: mode {self._mode}; paused until {guided} is handed back")
+                    self.upsets.append(("takeover", reports[-1]))
             elif self._in_control and self._paused and self._mode == guided:
                 self._paused = False
                 reports.append(f"control handed back ({guided}); resuming")

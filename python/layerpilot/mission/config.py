@@ -36,6 +36,7 @@ class LinkSettings:
     geofence_margin: float = 20.0  # m the geofence reaches beyond the behavior's area of interest
     end_action: str = "rtl"  # what the link node commands when the mission ends: rtl, land or loiter
     end_timeout: float = 10.0  # s the link node waits for the end action's COMMAND_ACK and mode change
+    on_reboot: str = "end"  # the autopilot rebooted: "end" the flying, or "pause" until a pilot hands GUIDED back
 
     def __post_init__(self) -> None:
         check_range("link.takeoff_altitude", self.takeoff_altitude, 1.0, 500.0)
@@ -44,6 +45,8 @@ class LinkSettings:
         if self.end_action not in ("rtl", "land", "loiter"):
             raise ConfigError(f"link.end_action: expected 'rtl', 'land' or 'loiter', got {self.end_action!r}")
         check_range("link.end_timeout", self.end_timeout, 1.0, 12.0)  # inside `up`'s 15 s stop grace
+        if self.on_reboot not in ("end", "pause"):
+            raise ConfigError(f"link.on_reboot: expected 'end' or 'pause', got {self.on_reboot!r}")
 
 
 @dataclass(frozen=True)

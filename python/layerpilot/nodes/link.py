@@ -6,7 +6,9 @@ setpoint and the pose is published at ``pose_rate`` (only once the autopilot has
 position: no (0, 0, 0) pose before the first LOCAL_POSITION_NED). When the node stops
 (SIGTERM, Ctrl-C, `up --duration`, or a failure) it commands the mission's end action
 (``end_action``: RTL, LAND or LOITER) and waits up to ``end_timeout`` for the autopilot to
-acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervising it. Pose stamps are the autopilot's
+acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervising it. A reboot of the
+autopilot (told apart from a pilot takeover by the link) ends the flying (``on_reboot = "end"``) or
+pauses it until a pilot has the vehicle armed, airborne and in GUIDED again (``"pause"``). Pose stamps are the autopilot's
 clock (time_boot_ms): the simulator stamps its camera frames, and so the clouds and layer
 sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
@@ -29,7 +31,8 @@ from layerpilot.geometry import Pose
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
 from layerpilot.mission.config import LinkSettings
-from layerpilot.nodes.runner import wait_for_stop
+from layerpilot.link.modes import GUIDED_MODE
+from layerpilot.nodes.runner import WAKE_PERIOD, wait_for_stop
 from layerpilot.nodes.supervise import Supervisor
 
 _log = logging.getLogger("layerpilot.link")
@@ -41,7 +44,8 @@ class LinkNode:
 
     ``connected`` is set once the autopilot's HEARTBEAT was heard (the node says ``ready`` then,
     ``connecting`` before); ``phase`` is ``connecting``, ``waiting for the autopilot``, ``taking off``,
-    ``flying``, ``ending`` or ``ended``; a link that cannot connect or take off fails the node
+    ``flying``, ``ended: autopilot rebooted`` or ``paused: autopilot rebooted ...`` (``on_reboot``),
+    ``ending`` or ``ended``; a link that cannot connect or take off fails the node
     (``supervisor.failure`` says why). ``end`` says what the end action did (see :meth:`stop`)."""
 
     def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence) -> None:
@@ -59,6 +63,7 @@ class LinkNode:
         self._speed = 0.0  # m/s last asked of the autopilot; 0 = its default
         self.end = ""  # what the mission's end action did, once the node stops
         self.poses = 0
+        self._held: tuple[Waypoint, str] | None = None  # the newest waypoint heard while paused after a reboot
         self._interrupter: threading.Thread | None = None
 
     def clock(self) -> float:
@@ -89,9 +94,50 @@ class LinkNode:
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
                                                     guarded(decode_waypoint, self._on_waypoint, self.rejects,
                                                             self.supervisor))
-        wait_for_stop(stop)
+        self._watch_reboots(stop)
+
+    def _watch_reboots(self, stop: threading.Event) -> None:
+        """Until ``stop``: after a reboot (the vehicle is disarmed on the ground) the flying ends, or with
+        ``on_reboot = "pause"`` waits until a pilot has it armed, airborne and in GUIDED again, then goes on
+        with the newest waypoint. A takeover is the link's own pause, not this."""
+        reboots = self.link.reboots
+        while not stop.wait(WAKE_PERIOD):
+            if self.link.reboots == reboots:
+                continue
+            reboots = self.link.reboots
+            if self.cfg.on_reboot == "end":
+                self.phase = "ended: autopilot rebooted"
+                _log.warning("the autopilot rebooted: the mission's flying ends (link.on_reboot = end)")
+                wait_for_stop(stop)
+                return
+            guided = GUIDED_MODE[self.link.flavour]
+            self.phase = f"paused: autopilot rebooted; waiting for a pilot to arm, take off and hand over {guided}"
+            _log.warning("the autopilot rebooted: %s (link.on_reboot = pause)", self.phase)
+            while not stop.wait(WAKE_PERIOD) and self.link.reboots == reboots and not self._flying_again(guided):
+                pass
+            if self.link.reboots == reboots and not stop.is_set():
+                self._resume()
+
+    def _flying_again(self, guided: str) -> bool:
+        t = self.link.telemetry()
+        return (t.armed and t.mode == guided and self.link.position_valid and t.home is not None
+                and t.position[2] - t.home[2] > 1.0)
+
+    def _resume(self) -> None:
+        try:
+            self.link.start_guided()
+        except LinkError as exc:
+            _log.warning("could not take control again after the reboot: %s", exc)
+            return
+        self.phase, held, self._held, self._last_seq = "flying", self._held, None, -1
+        _log.warning("flying again after the reboot: control handed over in %s", self.link.mode)
+        if held is not None:
+            self._on_waypoint(*held)
 
     def _on_waypoint(self, w: Waypoint, key: str) -> None:
+        if self.phase != "flying":  # paused after a reboot: the newest waypoint flies once control is back
+            self._held = (w, key)
+            return
         if w.seq == self._last_seq:  # decide repeats its current waypoint until reached
             return
         self._last_seq = w.seq

@@ -40,6 +40,7 @@ from layerpilot.config import check_range
 from layerpilot.link import modes
 from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_ned, ned_to_enu, yaw_enu_to_ned,
                                     yaw_ned_to_enu)
+from layerpilot.sim.battery import Battery, BatteryConfig
 from layerpilot.sim.geodesy import GeoOrigin
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.vehicle_transport import open_transport
@@ -65,6 +66,8 @@ DEFAULT_INTERVALS = {
     mav.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
     mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: 5.0,
     mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 1.0,   # ArduPilot only (its EXTRA3 stream); PX4 has none
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,      # ArduPilot's EXTRA3 stream
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,         # uptime (time_boot_ms); no GPS clock (0)
 }
 
 # EKF_STATUS_REPORT flags, after ArduCopter's estimator: without GPS attitude, vertical velocity
@@ -98,9 +101,7 @@ class EndpointConfig:
     land_slow_below_m: float = 10.0
     offboard_loss_s: float = 1.0       # PX4 COM_OF_LOSS_T
     offboard_min_rate_hz: float = 2.0  # PX4 wants a setpoint stream faster than this before OFFBOARD
-    battery_full_v: float = 16.8
-    battery_empty_v: float = 13.2
-    endurance_s: float = 1200.0        # armed time from full to empty
+    battery: BatteryConfig = field(default_factory=BatteryConfig)  # SYS_STATUS, BATTERY_STATUS, failsafe
 
     def __post_init__(self) -> None:
         if self.flavour not in (modes.ARDUPILOT, modes.PX4):
@@ -109,7 +110,7 @@ class EndpointConfig:
         check_range("component_id", self.component_id, 1, 255)
         for name in ("prearm_delay_s", "auto_disarm_s", "rtl_alt_m", "land_slow_below_m"):
             check_range(name, getattr(self, name), 0.0, None)
-        for name in ("land_speed_m_s", "offboard_loss_s", "offboard_min_rate_hz", "endurance_s"):
+        for name in ("land_speed_m_s", "offboard_loss_s", "offboard_min_rate_hz"):
             check_range(name, getattr(self, name), 1e-6, None)
 
 
@@ -169,7 +170,9 @@ class MavlinkVehicle:
         self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
         self._intervals = dict(DEFAULT_INTERVALS)
         self._next_send = {msg_id: 0.0 for msg_id in self._intervals}
-        self._armed_time = 0.0
+        self.battery = Battery(self.config.battery)
+        self.boots = 1
+        self._boot_at = 0.0  # mission time of the last boot: time_boot_ms counts from here
         self._ground_time = 0.0
         self._airborne = False
         self._rtl_phase = ""
@@ -199,6 +202,29 @@ class MavlinkVehicle:
 
     def resume_output(self) -> None:
         self.output_paused = False
+
+    def reboot(self) -> None:
+        """Restart the autopilot as a power cycle does: a new boot (time_boot_ms from 0, pre-arm checks and
+        GPS fix again after ``prearm_delay_s``), disarmed on the ground at home in its first mode, message
+        intervals back to their defaults. The sockets stay served (a radio or serial link sees the new
+        boot; SITL's TCP clients would reconnect); the battery keeps its charge."""
+        with self._lock:
+            self.boots += 1
+            self._boot_at = self.time
+            v = self.vehicle
+            v.position[:] = (self.home[0], self.home[1], v.ground_z)
+            v.velocity[:], v.acceleration[:], v.yaw_rate = 0.0, 0.0, 0.0
+            self._set_disarmed("")
+            v.hold()
+            self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
+            self._velocity_deadline, self._setpoint_times = None, []
+            self._intervals = dict(DEFAULT_INTERVALS)
+            self._next_send = {msg_id: self.time for msg_id in self._intervals}
+
+    @property
+    def uptime(self) -> float:
+        """Seconds since the autopilot booted (its time_boot_ms)."""
+        return self.time - self._boot_at
 
     def step(self, dt: float) -> None:
         """Handle what arrived, advance the mission clock by ``dt`` seconds, send what is due."""
@@ -328,7 +354,7 @@ class MavlinkVehicle:
         return mav.MAV_RESULT_ACCEPTED
 
     def _prearm_ok(self) -> bool:
-        return self.time >= self.config.prearm_delay_s
+        return self.uptime >= self.config.prearm_delay_s
 
     def _arm(self, force: bool) -> int:
         if self.armed:
@@ -360,7 +386,7 @@ class MavlinkVehicle:
         return mav.MAV_RESULT_ACCEPTED
 
     def _set_disarmed(self, reason: str) -> None:
-        if self.armed:
+        if self.armed and reason:
             self._text(mav.MAV_SEVERITY_INFO, reason)
         self.armed, self.vehicle.motors_on = False, False
         self._airborne = False
@@ -507,6 +533,10 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_CRITICAL, "Failsafe: offboard signal lost, holding")
             self.mode = "LOITER"
             v.hold()
+        if self.battery.low and self._airborne and self.mode not in ("RTL", "LAND"):  # BATT_FS_LOW_ACT = RTL
+            self._text(mav.MAV_SEVERITY_CRITICAL, f"Battery 1 is low {self.battery.voltage:.2f}V used "
+                                                  f"{self.battery.consumed_mah:.0f} mAh")
+            self._enter_mode("RTL")
         if self._velocity_deadline is not None and self.time > self._velocity_deadline:
             self._velocity_deadline = None
             v.hold()
@@ -541,8 +571,7 @@ class MavlinkVehicle:
 
     def _after_motion(self, dt: float) -> None:
         v = self.vehicle
-        if self.armed:
-            self._armed_time += dt
+        self.battery.drain(dt, self.armed)
         if not self.armed:
             return
         if self._airborne and v.on_ground and (self.mode == "LAND" or self._rtl_phase == "land"):
@@ -575,10 +604,10 @@ class MavlinkVehicle:
         return True
 
     def _has_fix(self) -> bool:
-        return self.time >= 0.5 * self.config.prearm_delay_s
+        return self.uptime >= 0.5 * self.config.prearm_delay_s
 
     def _boot_ms(self) -> int:
-        return int(self.time * 1000) & 0xFFFFFFFF
+        return int(self.uptime * 1000) & 0xFFFFFFFF
 
     def _send_heartbeat(self) -> None:
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -591,20 +620,24 @@ class MavlinkVehicle:
                                  modes.custom_mode_of(self.flavour, self.mode),
                                  mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY)
 
-    def _battery(self) -> tuple[float, int]:
-        cfg = self.config
-        left = max(0.0, 1.0 - self._armed_time / cfg.endurance_s)
-        return cfg.battery_empty_v + left * (cfg.battery_full_v - cfg.battery_empty_v), int(round(100 * left))
-
     def _send_sys_status(self) -> None:
         present = _SENSORS | mav.MAV_SYS_STATUS_PREARM_CHECK
         health = _SENSORS if self._has_fix() else _SENSORS & ~mav.MAV_SYS_STATUS_SENSOR_GPS
         if self._prearm_ok():
             health |= mav.MAV_SYS_STATUS_PREARM_CHECK
-        volts, remaining = self._battery()
-        current_ca = 1500 if self.armed else 50
-        self._mav.sys_status_send(present, present, health, 200, int(volts * 1000), current_ca, remaining,
-                                  0, 0, 0, 0, 0, 0)
+        b = self.battery
+        self._mav.sys_status_send(present, present, health, 200, int(b.voltage * 1000), int(b.current_a * 100),
+                                  int(round(100 * b.remaining)), 0, 0, 0, 0, 0, 0)
+
+    def _send_battery_status(self) -> None:
+        """As ArduCopter sends it without cell monitoring: the pack voltage in the first cell, the others unknown."""
+        b = self.battery
+        cells = [min(int(b.voltage * 1000), 65534)] + [65535] * 9
+        self._mav.battery_status_send(0, mav.MAV_BATTERY_FUNCTION_UNKNOWN, mav.MAV_BATTERY_TYPE_LIPO, 32767, cells,
+                                      int(b.current_a * 100), int(b.consumed_mah), -1, int(round(100 * b.remaining)))
+
+    def _send_system_time(self) -> None:
+        self._mav.system_time_send(0, self._boot_ms())
 
     def _geodetic(self) -> tuple[int, int, int]:
         lat, lon, alt = self.config.origin.to_geodetic(*self.vehicle.position)
@@ -615,7 +648,7 @@ class MavlinkVehicle:
         v = self.vehicle.velocity
         fix = mav.GPS_FIX_TYPE_3D_FIX if self._has_fix() else mav.GPS_FIX_TYPE_NO_FIX
         cog = int(math.degrees(math.atan2(v[0], v[1])) % 360 * 100) if np.hypot(v[0], v[1]) > 0.2 else 0xFFFF
-        self._mav.gps_raw_int_send(int(self.time * 1e6), fix, lat, lon, alt, 80, 120,
+        self._mav.gps_raw_int_send(int(self.uptime * 1e6), fix, lat, lon, alt, 80, 120,
                                    int(np.hypot(v[0], v[1]) * 100), cog, 14 if self._has_fix() else 3)
 
     def _send_global_position_int(self) -> None:
@@ -643,13 +676,13 @@ class MavlinkVehicle:
         lat, lon, alt = self.config.origin.to_geodetic(*self.home)
         n, e, d = map_to_local_ned(*self.home, self.ekf_origin)
         self._mav.home_position_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                     n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self.time * 1e6))
+                                     n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self.uptime * 1e6))
 
     def _send_gps_global_origin(self) -> None:
         """The EKF origin's latitude, longitude and altitude AMSL (the local NED frame's 0, 0, 0)."""
         lat, lon, alt = self.config.origin.to_geodetic(*self.ekf_origin)
         self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                         int(self.time * 1e6))
+                                         int(self.uptime * 1e6))
 
     def _send_ekf_status_report(self) -> None:
         if self._has_fix():

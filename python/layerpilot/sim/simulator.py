@@ -21,13 +21,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from layerpilot.config import check_range
+from layerpilot.sim.battery import BatteryConfig
 from layerpilot.sim.camera import CameraConfig
 from layerpilot.sim.world import World, WorldConfig
 
 
 @dataclass(frozen=True)
 class SimConfig:
-    """World, camera, frame rate (mission Hz), MAVLink URLs and the autopilot flavour."""
+    """World, camera, frame rate (mission Hz), MAVLink URLs, the autopilot flavour and its battery."""
 
     world: WorldConfig = field(default_factory=WorldConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -35,6 +36,7 @@ class SimConfig:
     step_s: float = 0.02
     urls: tuple[str, ...] = ("tcp:127.0.0.1:5760",)
     flavour: str = "ardupilot"
+    battery: BatteryConfig = field(default_factory=BatteryConfig)
 
     def __post_init__(self) -> None:
         check_range("frame_rate_hz", self.frame_rate_hz, 0.01, 100.0)
@@ -55,7 +57,8 @@ class Simulator:
         self.world = World(self.config.world)
         ground = float(self.world.terrain_height(0.0, 0.0))
         self.vehicle = Multicopter(position=(0.0, 0.0, ground), ground_z=ground)
-        self.endpoint = MavlinkVehicle(self.vehicle, self.config.urls, EndpointConfig(flavour=self.config.flavour))
+        self.endpoint = MavlinkVehicle(self.vehicle, self.config.urls, EndpointConfig(flavour=self.config.flavour,
+                                                                                    battery=self.config.battery))
         try:
             self.renderer = Renderer(self.world, self.config.camera)
         except Exception:
