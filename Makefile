@@ -17,7 +17,7 @@ demo: build
 	$(VENV)/bin/layerpilot demo
 
 test: build
-	$(VENV)/bin/lint-imports && $(PY) -m pytest -q
+	$(VENV)/bin/lint-imports && $(PY) -m pytest -q -n 2
 
 build: system $(VENV)/.installed
 
