@@ -1,4 +1,4 @@
-"""Map commands: `layerpilot map info|scan`."""
+"""Map commands: `layerpilot map info|scan|images`."""
 
 from __future__ import annotations
 
@@ -17,6 +17,16 @@ def register(commands: argparse._SubParsersAction) -> None:
     scan.add_argument("--out", type=Path, default=Path("runs/scan"))
     scan.add_argument("--resolution", type=float, default=0.2)
     scan.set_defaults(func=_scan)
+    images = sub.add_parser("images", help="build the map and layers from a folder of geotagged drone photos")
+    images.add_argument("folder", type=Path, help="folder of JPEGs with EXIF GPS and DJI/Parrot XMP attitude")
+    images.add_argument("--out", type=Path, default=Path("runs/photos"))
+    images.add_argument("--calibration", type=Path, help="OpenCV YAML calibration overriding EXIF intrinsics")
+    images.add_argument("--origin", type=float, nargs=3, metavar=("LAT", "LON", "ALT"),
+                        help="map frame origin (default: below the first photo at its take-off height)")
+    images.add_argument("--width", type=int, default=1000, help="working image width in pixels")
+    images.add_argument("--resolution", type=float, default=0.5, help="voxel size in metres")
+    images.add_argument("--raw-poses", action="store_true", help="skip the image-based pose refinement")
+    images.set_defaults(func=_images)
 
 
 def _info(args: argparse.Namespace) -> None:
@@ -31,3 +41,24 @@ def _scan(args: argparse.Namespace) -> None:
 
     for path in build_scan_map(args.scan, args.out, args.resolution):
         print(f"wrote {path}")
+
+
+def _images(args: argparse.Namespace) -> None:
+    from layerpilot.eval.photo_run import build_photo_map, write_photo_run
+    from layerpilot.geodesy import LocalFrame
+    from layerpilot.photos import PhotoConfig, read_folder
+    from layerpilot.photos.calibration import read_calibration
+
+    config = PhotoConfig(width=args.width, refine=not args.raw_poses, resolution=args.resolution)
+    folder = read_folder(args.folder, LocalFrame(*args.origin) if args.origin else None,
+                         read_calibration(args.calibration) if args.calibration else None, args.width)
+    for name, why in folder.skipped.items():
+        print(f"skipped {name}: {why}")
+    result = build_photo_map(folder, config, label="map images")
+    for p in result.pairs:
+        print(f"pair {folder.photos[p.ref].path.name} + {folder.photos[p.partner].path.name}: {p.reason}"
+              + (f", {p.refinement.inliers} inliers, rotation corrected by {p.refinement.rotation_correction_deg:.2f} deg"
+                 if p.refinement and p.refinement.inliers else "")
+              + (f", {len(p.cloud)} points" if p.cloud is not None else ""))
+    paths = write_photo_run(result, args.out, f"layerpilot map images: {args.folder.name}")
+    print(f"wrote {args.out} ({paths['html'] if 'html' in paths else ', '.join(map(str, paths.values()))})")
