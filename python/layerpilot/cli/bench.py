@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from layerpilot.cli.depth import size
 
@@ -38,6 +39,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--rate", type=float, default=10.0, help="clouds per second offered")
     b.set_defaults(func=_bus)
 
+    b = benches.add_parser("photos", help="stereo from real photos vs a reference cloud, refined vs raw GNSS poses")
+    b.add_argument("--folder", type=Path, help="photo folder (default: ../shared/data/brighton_beach/images)")
+    b.add_argument("--reference", type=Path, help="LAS/LAZ reference cloud (default: that folder's model.laz)")
+    b.add_argument("--width", type=int, default=1000, help="working image width in pixels")
+    b.set_defaults(func=_photos)
+
 
 def _map(args: argparse.Namespace) -> None:
     from layerpilot.bench.map import main
@@ -69,3 +76,9 @@ def _bus(args: argparse.Namespace) -> int:
     from layerpilot.bench.bus import main
 
     return main(args.seconds, args.rate)
+
+
+def _photos(args: argparse.Namespace) -> int:
+    from layerpilot.bench.photos import main
+
+    return main(args.folder, args.reference, args.width)
