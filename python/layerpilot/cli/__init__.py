@@ -1,7 +1,7 @@
 """The `layerpilot` command.
 
 One module per command group (``map``, ``layers``, ``depth``, ``sim``, ``nodes``,
-``link``, ``eval``, ``bench``), each with ``register(commands)`` adding its
+``link``, ``plan``, ``eval``, ``view``, ``bench``), each with ``register(commands)`` adding its
 sub-commands. Heavy imports happen inside the handlers so that ``layerpilot --help``
 stays fast. ``python -m layerpilot.cli`` runs the same command (``__main__``).
 """
@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from layerpilot.cli import bench, depth, eval, layers, link, map, nodes, sim
+from layerpilot.cli import bench, depth, eval, layers, link, map, nodes, plan, sim, view
 
-GROUPS = (map, layers, depth, sim, nodes, link, eval)
+GROUPS = (map, layers, depth, sim, nodes, link, plan, eval, view)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,5 +1,5 @@
 """`layerpilot link`: the link node, or one action for bench tests on a real autopilot or SITL
-(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`)."""
+(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`, `upload PLAN`)."""
 
 from __future__ import annotations
 
@@ -34,6 +34,13 @@ def register(commands: argparse._SubParsersAction) -> None:
     sub.add_parser("rtl", help="return to launch and wait until it disarms")
     for action in sub.choices.values():
         action.set_defaults(func=_act)
+    upload = sub.add_parser("upload", help="upload a QGroundControl .plan as the vehicle's mission "
+                            "(MISSION_ITEM_INT protocol) and wait for its MISSION_ACK")
+    upload.add_argument("plan", help=".plan file (e.g. from `layerpilot plan next`)")
+    upload.add_argument("--item-timeout", type=float, default=1.5,
+                        help="seconds to wait for each answer of the vehicle before sending again (default 1.5)")
+    upload.add_argument("--retries", type=int, default=3, help="sends again per answer before giving up (default 3)")
+    upload.set_defaults(func=_upload)
 
 
 LINK_FLAGS = {"mavlink": "link.link.url", "sysid": "link.link.source_system", "compid": "link.link.source_component",
@@ -139,4 +146,40 @@ def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence) -
             return 1
         print(link.telemetry().line(), flush=True)
     print(f"{action}: done")
+    return 0
+
+
+def _upload(args: argparse.Namespace) -> int:
+    """Upload a .plan: exit 0 once the vehicle accepted it, 1 with one line on stderr when it did not answer or
+    refused (2 for a bad flag or a bad file, from main)."""
+    import sys
+
+    from layerpilot.cli.nodes import mission_from_args
+    from layerpilot.link.connection import open_connection
+    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission
+    from layerpilot.link.qgc_plan import mission_items, read_plan
+
+    if not args.item_timeout > 0 or args.retries < 0:
+        raise ValueError(f"--item-timeout must be > 0 and --retries >= 0, got {args.item_timeout}, {args.retries}")
+    plan = read_plan(args.plan)
+    mission = mission_from_args(args, LINK_FLAGS)
+    config = link_settings(args, mission, args.vehicle or mission.vehicles[0]).link
+    wait = config.connect_timeout_s if args.timeout is None else args.timeout
+    conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
+    try:
+        heartbeat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=wait,
+                                    condition="HEARTBEAT.autopilot != 8")  # 8: MAV_AUTOPILOT_INVALID (a GCS)
+        if heartbeat is None:
+            print(f"layerpilot link upload: error: no autopilot HEARTBEAT on {config.url} within {wait:g} s",
+                  file=sys.stderr, flush=True)
+            return 1
+        target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
+        upload_mission(conn, mission_items(plan, heartbeat.autopilot), target, timeout=args.item_timeout,
+                       retries=args.retries)
+    except MissionTransferError as exc:
+        print(f"layerpilot link upload: error: {exc}", file=sys.stderr, flush=True)
+        return 1
+    finally:
+        conn.close()
+    print(f"upload: {len(plan.items)} mission items accepted by system {target[0]} on {config.url}")
     return 0

@@ -42,6 +42,8 @@ from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_n
                                     yaw_ned_to_enu)
 from layerpilot.sim.battery import Battery, BatteryConfig
 from layerpilot.sim.geodesy import GeoOrigin
+from layerpilot.sim.mission_store import MESSAGES as MISSION_MESSAGES
+from layerpilot.sim.mission_store import MissionStore
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.vehicle_transport import open_transport
 
@@ -179,6 +181,7 @@ class MavlinkVehicle:
         self._velocity_deadline: float | None = None
         self._setpoint_times: list[float] = []
         self.messages_received = 0
+        self.mission = MissionStore(self._mav)  # the mission protocol's vehicle side (upload, download)
 
     # --- public API ------------------------------------------------------------------
     @property
@@ -305,6 +308,8 @@ class MavlinkVehicle:
         elif kind == "COMMAND_LONG" and self._for_me(msg):
             result = self._command(msg)
             self._mav.command_ack_send(msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        elif kind in MISSION_MESSAGES and self._for_me(msg):
+            self.mission.handle(msg)
         elif kind == "SET_MODE" and msg.target_system == self.config.system_id:
             result = self._set_mode_numbers(msg.base_mode, msg.custom_mode)
             self._mav.command_ack_send(mav.MAVLINK_MSG_ID_SET_MODE, result, 0, 0,
