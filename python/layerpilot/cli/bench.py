@@ -17,8 +17,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--seed", type=int, default=0)
     b.set_defaults(func=_map)
 
-    b = benches.add_parser("decide", help="layers + decision time on 512x512 and 1024x1024 grids")
-    b.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
+    b = benches.add_parser("decide", help="layers + decision tick on 512, 1024 and 2048 square grids")
+    b.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048])
     b.add_argument("--repeat", type=int, default=30)
     b.add_argument("--behavior", default="balanced")
     b.set_defaults(func=_decide)

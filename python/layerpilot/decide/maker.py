@@ -1,8 +1,16 @@
-"""The decision maker: layers -> A0 (weights) -> A1 (zone) -> A2 (distance ring) -> A3 (path history) -> waypoint."""
+"""The decision maker: layers -> A0 (weights) -> A1 (zone) -> A2 (distance ring) -> A3 (path history) -> waypoint.
+
+P is exactly 0 beyond r_i, so A3 is 0 on every cell farther than r_i from the drone and
+no such cell can be chosen: a tick computes every term on the window of cells within r_i
+(``DecisionMaker.window``), not on the whole grid. Coverage (a count over the whole area)
+and the layers' own normalisation still see the whole grid. Being a rectangle, the
+window keeps the grid's row-major order, so argmax, ties and the seeded noise draw the
+same cells as a whole-grid pass (tests/test_decide_window.py).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +21,7 @@ from layerpilot.decide.decision import Candidate, Decision
 from layerpilot.decide.history import PathHistory
 from layerpilot.decide.schedule import WeightSchedule
 from layerpilot.decide.terrain import terrain_altitude
-from layerpilot.grid import GridGeometry
+from layerpilot.grid import GridGeometry, GridWindow
 from layerpilot.layers.layerset import LayerSet
 
 
@@ -36,16 +44,23 @@ class _Grid:
     inside: np.ndarray  # bool Z > 0
     zone_cells: int
 
-    def distance(self, x: float, y: float) -> np.ndarray:
-        dx, dy = self.xs - np.float32(x), self.ys - np.float32(y)
+    def distance(self, x: float, y: float, window: GridWindow) -> np.ndarray:
+        """Metres from (x, y) to each cell centre of ``window``."""
+        dx = self.xs[:, window.col0:window.col1] - np.float32(x)
+        dy = self.ys[window.row0:window.row1] - np.float32(y)
         d = dx * dx + dy * dy
         return np.sqrt(d, out=d)
 
 
 @dataclass
 class _Scores:
+    """Every term on ``window`` (arrays of its shape); cells are (row, col) of the whole grid."""
+
     layers: LayerSet
     grid: _Grid
+    window: GridWindow
+    position: Sequence[float]
+    avoid: Sequence[Sequence[float]]
     weights: dict[str, float]
     coverage: float
     a0: np.ndarray
@@ -55,6 +70,9 @@ class _Scores:
     a3: np.ndarray
     allowed: np.ndarray | None  # False near other drones' targets (None: everywhere allowed)
     distance: np.ndarray
+
+    def at(self, arr: np.ndarray, cell: tuple[int, int]) -> float:
+        return float(arr[cell[0] - self.window.row0, cell[1] - self.window.col0])
 
 
 class DecisionMaker:
@@ -75,6 +93,7 @@ class DecisionMaker:
         self._target_p = 0.0
         self._switched_at = -np.inf
         self._grid_cache: _Grid | None = None
+        self._widen: Callable[[GridWindow], LayerSet] | None = None
 
     def decide(
         self,
@@ -84,13 +103,20 @@ class DecisionMaker:
         *,
         intermediates: bool = False,
         avoid: Sequence[Sequence[float]] = (),
+        widen: Callable[[GridWindow], LayerSet] | None = None,
     ) -> Decision:
         """A decision tick: the next waypoint from ``position`` (map frame) at mission ``time``.
 
         ``avoid``: (x, y) points, e.g. other drones' targets; cells within r_e of them are not chosen.
+        ``widen``: the layers on a bigger window, for ``layers`` computed on ``window(...)``
+        alone: the "approach" fallback may head for a cell beyond r_i and explains it.
         """
         scores = self._evaluate(layers, position, time, tick=True, avoid=avoid)
-        decision = self._choose(scores, position, time, intermediates)
+        self._widen = widen
+        try:
+            decision = self._choose(scores, position, time, intermediates)
+        finally:
+            self._widen = None
         self._set_target(decision, scores, time)
         return decision
 
@@ -109,21 +135,33 @@ class DecisionMaker:
         if not rt.enabled or self.target is None or time - self._switched_at < rt.min_interval:
             return None
         scores = self._evaluate(layers, position, time, tick=False, avoid=avoid)
-        best = self._pick(scores.a3)
+        best = self._pick(scores.a3, scores.window)
         if best is None:
             return None
         g = scores.grid.geometry
         row, col = g.cell_of(*self.target.waypoint[:2])
         current = 0.0
-        if g.contains(row, col):
-            current = float(scores.a1[row, col] * scores.h[row, col]) * self._target_p
+        if g.contains(row, col):  # the window holds the target's cell (see ``window``)
+            current = float(np.float32(scores.at(scores.a1, (row, col))) * np.float32(scores.at(scores.h, (row, col))))
+            current *= self._target_p
         bx, by = g.cell_center(*best)
         tx, ty = self.target.waypoint[:2]
-        if float(scores.a3[best]) <= current * (1.0 + rt.margin) or np.hypot(bx - tx, by - ty) < rt.min_separation:
+        if scores.at(scores.a3, best) <= current * (1.0 + rt.margin) or np.hypot(bx - tx, by - ty) < rt.min_separation:
             return None
         decision = self._explain(scores, best, position, time, None, retargeted=True)
         self._set_target(decision, scores, time)
         return decision
+
+    def window(self, geometry: GridGeometry, position: Sequence[float]) -> GridWindow:
+        """The cells a tick at ``position`` computes: within r_i of it, plus the current target's cell.
+
+        Compute the layers on it (``compute_layers(..., window=...)``) to pay for the
+        drone's neighbourhood instead of the whole grid; the choice is the same.
+        """
+        win = GridWindow.around(geometry, float(position[0]), float(position[1]), self.behavior.r_i)
+        if self.target is not None:
+            win = win.union(GridWindow.around(geometry, *self.target.waypoint[:2], 0.0))
+        return win
 
     # -- the equations ---------------------------------------------------------------------
 
@@ -140,7 +178,8 @@ class DecisionMaker:
         return self._grid_cache
 
     def _evaluate(
-        self, layers: LayerSet, position: Sequence[float], time: float, tick: bool, avoid: Sequence[Sequence[float]]
+        self, layers: LayerSet, position: Sequence[float], time: float, tick: bool, avoid: Sequence[Sequence[float]],
+        window: GridWindow | None = None,
     ) -> _Scores:
         if len(position) < 2 or not np.all(np.isfinite(np.asarray(position[:3], float))):
             raise ValueError(f"position: expected finite (x, y[, z]), got {position!r}")
@@ -148,34 +187,47 @@ class DecisionMaker:
             raise ValueError(f"time: must be finite, got {time}")
         b = self.behavior
         grid = self._grid(layers.geometry)
+        win = self.window(layers.geometry, position) if window is None else window
+        covered = GridWindow.full(layers.geometry) if layers.window is None else layers.window
+        if not covered.contains(win):
+            raise ValueError(f"layers: computed on {covered}, but this tick needs {win} (DecisionMaker.window)")
+        part = win.within(covered)
         coverage = float(np.count_nonzero(layers.observed & grid.inside)) / grid.zone_cells
         weights = self.schedule.weights(time, coverage)
-        a0 = np.zeros(layers.geometry.shape, np.float32)
+        a0 = np.zeros(win.shape, np.float32)
         for name, w in weights.items():
             if w > 0:
                 if name not in layers.layers:
                     raise ValueError(f"layers: behavior weights {name!r} but the layer set has only {layers.names}")
-                a0 += np.float32(w) * layers.layers[name]
-        a1 = a0 * grid.zone
-        d = grid.distance(position[0], position[1])
+                a0 += np.float32(w) * layers.layers[name][part]
+        a1 = a0 * grid.zone[win.slices]
+        d = grid.distance(position[0], position[1], win)
         p = distance_preference(d, b.r_e, b.r_i)
-        h = self.history.tick(layers.geometry, d) if tick else self.history.on(layers.geometry)
+        h = self.history.tick(layers.geometry, d, win) if tick else self.history.on(layers.geometry, win)
         a3 = a1 * p
         a3 *= h
-        allowed = None
-        for point in avoid:
-            near = grid.distance(point[0], point[1]) < b.r_e
-            allowed = ~near if allowed is None else allowed & ~near
+        allowed = self._allowed(grid, avoid, win)
         if allowed is not None:
             a3 *= allowed
-        return _Scores(layers, grid, weights, coverage, a0, a1, p, h, a3, allowed, d)
+        return _Scores(layers, grid, win, position, avoid, weights, coverage, a0, a1, p, h, a3, allowed, d)
 
-    def _pick(self, score: np.ndarray) -> tuple[int, int] | None:
-        """Argmax of ``score`` + seeded noise in [0, noise) on positive cells; None if no cell is > 0.
+    def _allowed(self, grid: _Grid, avoid: Sequence[Sequence[float]], window: GridWindow) -> np.ndarray | None:
+        """False within r_e of any ``avoid`` point (None when there are none)."""
+        allowed = None
+        for point in avoid:
+            near = grid.distance(point[0], point[1], window) < self.behavior.r_e
+            allowed = ~near if allowed is None else allowed & ~near
+        return allowed
+
+    def _pick(self, score: np.ndarray, window: GridWindow) -> tuple[int, int] | None:
+        """Argmax of ``score`` (on ``window``) + seeded noise in [0, noise) on positive cells; None if no cell is > 0.
 
         Only cells within ``noise`` of the maximum can win, so noise is drawn for those
         alone: the same choice as noising every cell, at the cost of one comparison.
+        Returns the grid's (row, col).
         """
+        if score.size == 0:
+            return None
         top = float(score.max())
         if not top > 0:
             return None
@@ -185,28 +237,30 @@ class DecisionMaker:
             flat = flat[np.argmax(score.flat[flat] + noise * self.rng.random(len(flat), dtype=np.float32))]
         else:
             flat = flat[0]
-        return divmod(int(flat), score.shape[1])
+        row, col = divmod(int(flat), score.shape[1])
+        return row + window.row0, col + window.col0
 
     def _runner_up(self, scores: _Scores, best: tuple[int, int]) -> tuple[int, int] | None:
         """Best cell at least r_e (and one cell) from the winner: a genuinely different option."""
         g = scores.grid.geometry
         reach = max(self.behavior.r_e, g.resolution)
         k = int(np.ceil(reach / g.resolution))
-        r0, r1 = max(best[0] - k, 0), min(best[0] + k + 1, g.height)
-        c0, c1 = max(best[1] - k, 0), min(best[1] + k + 1, g.width)
+        win = scores.window
+        r0, r1 = max(best[0] - k, win.row0), min(best[0] + k + 1, win.row1)
+        c0, c1 = max(best[1] - k, win.col0), min(best[1] + k + 1, win.col1)
         bx, by = g.cell_center(*best)
         dx = scores.grid.xs[:, c0:c1] - np.float32(bx)
         dy = scores.grid.ys[r0:r1] - np.float32(by)
-        window = scores.a3[r0:r1, c0:c1]
-        saved = window.copy()
-        window[dx * dx + dy * dy < reach * reach] = 0.0
+        near = scores.a3[r0 - win.row0:r1 - win.row0, c0 - win.col0:c1 - win.col0]
+        saved = near.copy()
+        near[dx * dx + dy * dy < reach * reach] = 0.0
         try:
-            return self._pick(scores.a3)
+            return self._pick(scores.a3, win)
         finally:
-            window[...] = saved
+            near[...] = saved
 
     def _choose(self, scores: _Scores, position: Sequence[float], time: float, intermediates: bool) -> Decision:
-        best = self._pick(scores.a3)
+        best = self._pick(scores.a3, scores.window)
         if best is not None:
             runner = self._runner_up(scores, best)
             return self._explain(scores, best, position, time, runner, intermediates=intermediates)
@@ -222,13 +276,17 @@ class DecisionMaker:
            far outside the area): the nearest cell of the area at least r_e away, or, if the
            whole area is within r_e, its farthest cell.
         """
-        z = scores.grid.zone if scores.allowed is None else scores.grid.zone * scores.allowed
-        cell = self._pick(z * scores.p * scores.h)
+        grid, win = scores.grid, scores.window
+        z = grid.zone[win.slices] if scores.allowed is None else grid.zone[win.slices] * scores.allowed
+        cell = self._pick(z * scores.p * scores.h, win)
         if cell is not None:
             return cell, "wander"
+        whole = GridWindow.full(grid.geometry)  # the area may lie beyond r_i: look at all of it
+        allowed = self._allowed(grid, scores.avoid, whole)
+        z = grid.zone if allowed is None else grid.zone * allowed
         if not z.any():
-            z = scores.grid.zone  # every area cell is near another drone's target: ignore that
-        d = np.where(z > 0, scores.distance, np.nan)
+            z = grid.zone  # every area cell is near another drone's target: ignore that
+        d = np.where(z > 0, grid.distance(scores.position[0], scores.position[1], whole), np.nan)
         far = d >= self.behavior.r_e
         flat = int(np.nanargmin(np.where(far, d, np.nan))) if far.any() else int(np.nanargmax(d))
         return divmod(flat, d.shape[1]), "approach"
@@ -254,27 +312,26 @@ class DecisionMaker:
         retargeted: bool = False,
         intermediates: bool = False,
     ) -> Decision:
+        if not scores.window.contains(GridWindow(cell[0], cell[0] + 1, cell[1], cell[1] + 1)):
+            scores = self._widened(scores, cell, time)
         r, c = cell
         layers = scores.layers
-        contributions = {k: float(np.float32(w) * layers.layers[k][r, c]) for k, w in scores.weights.items() if w > 0}
-        images = None
-        if intermediates:
-            a2 = scores.a1 * scores.p
-            images = {"A0": scores.a0, "A1": scores.a1, "A2": a2, "A3": scores.a3,
-                      "Z": scores.grid.zone, "P": scores.p, "H": scores.h.copy()}
+        lr, lc = (r, c) if layers.window is None else (r - layers.window.row0, c - layers.window.col0)
+        contributions = {k: float(np.float32(w) * layers.layers[k][lr, lc]) for k, w in scores.weights.items() if w > 0}
+        images = self._images(scores, time) if intermediates else None
         runner_up = None
         if runner is not None:
-            runner_up = Candidate(self._waypoint(scores, runner, position), runner, float(scores.a3[runner]))
+            runner_up = Candidate(self._waypoint(scores, runner, position), runner, scores.at(scores.a3, runner))
         return Decision(
             time=float(time),
             waypoint=self._waypoint(scores, cell, position),
             cell=(int(r), int(c)),
-            score=float(scores.a3[r, c]),
+            score=scores.at(scores.a3, cell),
             contributions=contributions,
-            aggregate=float(scores.a0[r, c]),
+            aggregate=scores.at(scores.a0, cell),
             zone=float(scores.grid.zone[r, c]),
-            preference=float(scores.p[r, c]),
-            history=float(scores.h[r, c]),
+            preference=scores.at(scores.p, cell),
+            history=scores.at(scores.h, cell),
             weights=dict(scores.weights),
             coverage=scores.coverage,
             runner_up=runner_up,
@@ -282,6 +339,26 @@ class DecisionMaker:
             retargeted=retargeted,
             intermediates=images,
         )
+
+    def _widened(self, scores: _Scores, cell: tuple[int, int], time: float) -> _Scores:
+        """The terms again (H as ticked) on a window that reaches ``cell``, to explain a choice beyond r_i."""
+        win = scores.window.union(GridWindow(cell[0], cell[0] + 1, cell[1], cell[1] + 1))
+        layers = scores.layers
+        if layers.window is not None and not layers.window.contains(win):
+            if self._widen is None:
+                raise ValueError(f"layers: computed on {layers.window}, but the choice {cell} lies outside it; "
+                                 "pass widen= to decide")
+            layers = self._widen(win)
+        return self._evaluate(layers, scores.position, time, tick=False, avoid=scores.avoid, window=win)
+
+    def _images(self, scores: _Scores, time: float) -> dict[str, np.ndarray]:
+        """Every term on the whole grid, for pictures (the tick has already updated H)."""
+        if scores.layers.window is not None:
+            raise ValueError("intermediates: need layers of the whole grid (compute_layers without a window)")
+        whole = self._evaluate(scores.layers, scores.position, time, tick=False, avoid=scores.avoid,
+                               window=GridWindow.full(scores.grid.geometry))
+        return {"A0": whole.a0, "A1": whole.a1, "A2": whole.a1 * whole.p, "A3": whole.a3,
+                "Z": whole.grid.zone, "P": whole.p, "H": whole.h}
 
     def _set_target(self, decision: Decision, scores: _Scores, time: float) -> None:
         self.target = decision

@@ -6,8 +6,12 @@ functions never clip the area of interest (the fringe must see past it).
 
 from __future__ import annotations
 
-import cv2
+import threading
+
 import numpy as np
+
+from layerpilot.grid import GridWindow
+from layerpilot.layers.distance import ClosedDistance
 
 
 def _check_mask(observed: np.ndarray) -> np.ndarray:
@@ -21,7 +25,7 @@ def _check_like(name: str, arr: np.ndarray, observed: np.ndarray) -> None:
         raise ValueError(f"{name}: expected shape {observed.shape}, got {arr.shape}")
 
 
-def fringe(observed: np.ndarray, closing: int = 3) -> np.ndarray:
+def fringe(observed: np.ndarray, closing: int = 3, window: GridWindow | None = None) -> np.ndarray:
     """1 on the frontier (observed with an unobserved 8-neighbour), 1/d cells inside, 0 unobserved.
 
     d is the exact Euclidean distance (in cells) to the nearest unobserved column, so the
@@ -30,30 +34,51 @@ def fringe(observed: np.ndarray, closing: int = 3) -> np.ndarray:
     unobserved holes smaller than the kernel (they count as observed here), so the frontier
     is the true edge of the map and not every gap between trees. ``closing`` <= 1: no closing.
     A window with no unobserved column has no frontier: all 0.
+
+    The distances are kept from call to call and redone only where the mask changed
+    (``layers.distance``); ``window``: only those cells (an array of the window's shape).
     """
-    mask = np.ascontiguousarray(_check_mask(observed)).view(np.uint8)
+    _check_mask(observed)
     if closing < 0:
         raise ValueError(f"closing: must be >= 0, got {closing}")
-    if closing > 1:
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (closing, closing))
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel)
-    if not mask.any() or mask.all():
-        return np.zeros(mask.shape, np.float32)
-    dist = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    with _LOCK:
+        tracker = _TRACKERS.setdefault(closing, ClosedDistance(closing))
+    region = GridWindow(0, observed.shape[0], 0, observed.shape[1]) if window is None else window
+    with tracker.lock:
+        closed, dist = tracker.update(observed)
+        if tracker.zeros in (0, closed.size):
+            return np.zeros(region.shape, np.float32)
+        d, mask = dist[region.slices].copy(), closed[region.slices].copy()
     with np.errstate(divide="ignore"):
-        out = np.reciprocal(dist, out=dist)  # inf on unobserved cells (d = 0)
+        out = np.reciprocal(d, out=d)  # inf on unobserved cells (d = 0)
     out[out > 0.7] = 1.0  # d is exactly 1 or sqrt(2) on the frontier; every interior d >= 2
     out[mask == 0] = 0.0
     return out
 
 
-def _scaled(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """(v - min) / (max - min) over ``valid`` cells, 0 elsewhere and when all values are equal."""
-    out = np.zeros(values.shape, np.float32)
+_LOCK = threading.Lock()
+_TRACKERS: dict[int, ClosedDistance] = {}  # per closing size: the last mask's distances, kept up to date
+
+
+def _value_range(values: np.ndarray, observed: np.ndarray) -> tuple[float, float] | None:
+    """(min, max) of the finite values of observed cells; None if there are none.
+
+    Unobserved columns hold NaN (``ColumnLayers``' contract), so a NaN-ignoring reduction
+    over the whole array, one fast pass, finds them; only if it meets an infinity (not a
+    valid value) is the slower masked reduction needed.
+    """
+    lo, hi = float(np.fmin.reduce(values, axis=None)), float(np.fmax.reduce(values, axis=None))
+    if np.isfinite(lo) and np.isfinite(hi):
+        return lo, hi
+    valid = observed & np.isfinite(values)
     if not valid.any():
-        return out
-    lo = float(np.min(values, where=valid, initial=np.inf))
-    hi = float(np.max(values, where=valid, initial=-np.inf))
+        return None
+    return float(np.min(values, where=valid, initial=np.inf)), float(np.max(values, where=valid, initial=-np.inf))
+
+
+def _scaled(values: np.ndarray, valid: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """(v - lo) / (hi - lo) on ``valid`` cells, 0 elsewhere and when hi == lo."""
+    out = np.zeros(values.shape, np.float32)
     if hi > lo:
         np.subtract(values, lo, out=out, where=valid, casting="same_kind")
         out *= np.float32(1.0 / (hi - lo))
@@ -61,28 +86,46 @@ def _scaled(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-def time_since_seen(observed: np.ndarray, last_seen: np.ndarray, now: float) -> np.ndarray:
-    """Age (now - last seen) scaled over observed columns: oldest 1, freshest 0, all equal 0."""
+def _region(arr: np.ndarray, window: GridWindow | None) -> np.ndarray:
+    return arr if window is None else arr[window.slices]
+
+
+def time_since_seen(observed: np.ndarray, last_seen: np.ndarray, now: float,
+                    window: GridWindow | None = None) -> np.ndarray:
+    """Age (now - last seen) scaled over observed columns: oldest 1, freshest 0, all equal 0.
+
+    ``window``: only those cells, still scaled over the whole grid.
+    """
     _check_like("last_seen", last_seen, _check_mask(observed))
     if not np.isfinite(now):
         raise ValueError(f"now: must be finite, got {now}")
-    valid = observed & np.isfinite(last_seen)
-    return _scaled(now - last_seen, valid)
+    seen = _value_range(last_seen, observed)
+    last, obs = _region(last_seen, window), _region(observed, window)
+    if seen is None:
+        return np.zeros(last.shape, np.float32)
+    # now - t falls as t grows, so its range is (now - newest, now - oldest), the same floats
+    return _scaled(now - last, obs & np.isfinite(last), now - seen[1], now - seen[0])
 
 
-def min_distance(observed: np.ndarray, distance: np.ndarray, max_distance: float = 100.0) -> np.ndarray:
+def min_distance(observed: np.ndarray, distance: np.ndarray, max_distance: float = 100.0,
+                 window: GridWindow | None = None) -> np.ndarray:
     """Closest observation distance / ``max_distance``; farther than that counts as unobserved (0)."""
     _check_like("min_distance", distance, _check_mask(observed))
     if not max_distance > 0:
         raise ValueError(f"max_distance: must be > 0, got {max_distance}")
+    distance, observed = _region(distance, window), _region(observed, window)
     seen = observed & (distance <= max_distance)
     return np.where(seen, distance / np.float32(max_distance), np.float32(0)).astype(np.float32, copy=False)
 
 
-def elevation(observed: np.ndarray, top: np.ndarray) -> np.ndarray:
+def elevation(observed: np.ndarray, top: np.ndarray, window: GridWindow | None = None) -> np.ndarray:
     """Top of the highest occupied voxel scaled over observed columns (lowest 0, highest 1)."""
     _check_like("elevation", top, _check_mask(observed))
-    return _scaled(top, observed & np.isfinite(top))
+    span = _value_range(top, observed)
+    top, obs = _region(top, window), _region(observed, window)
+    if span is None:
+        return np.zeros(top.shape, np.float32)
+    return _scaled(top, obs & np.isfinite(top), *span)
 
 
 def color(observed: np.ndarray, rgb: np.ndarray) -> np.ndarray:

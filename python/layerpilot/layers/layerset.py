@@ -7,7 +7,7 @@ from functools import cached_property
 
 import numpy as np
 
-from layerpilot.grid import GridGeometry
+from layerpilot.grid import GridGeometry, GridWindow
 from layerpilot.layers import features
 
 
@@ -19,6 +19,8 @@ class LayerSet:
     because the decision needs coverage of the area of interest and terrain heights;
     ``rgb`` (uint8 (h, w, 3), the top voxel's color, 0 unobserved) is for pictures only and
     is never weighted; ``color`` gives it as float32 in [0, 1] when a picture needs it.
+    ``window``: the layers cover only those cells (the decision computes no farther than it
+    can choose); ``observed``, ``elevation_m`` and ``rgb`` always cover the whole grid.
     """
 
     geometry: GridGeometry
@@ -27,11 +29,14 @@ class LayerSet:
     elevation_m: np.ndarray
     rgb: np.ndarray
     now: float = 0.0
+    window: GridWindow | None = None
 
     def __post_init__(self) -> None:
         shape = self.geometry.shape
+        if self.window is not None and not GridWindow.full(self.geometry).contains(self.window):
+            raise ValueError(f"window: {self.window} does not lie within the grid {self.geometry}")
         for name, arr in self.layers.items():
-            check_layer(name, arr, shape)
+            check_layer(name, arr, shape if self.window is None else self.window.shape)
         for name, arr, want, dtype in (
             ("observed", self.observed, shape, np.bool_),
             ("elevation_m", self.elevation_m, shape, np.float32),

@@ -5,6 +5,10 @@ the columns' grid shape with values in [0, 1]. ``voxel_map`` is the ``VoxelMap``
 columns came from, or None when only columns are at hand. Register with
 ``register_layer("name", fn)`` (or as a decorator); a behavior file then weights it by name
 and lists the module that registers it under ``plugins``. See docs/layers.md.
+
+A decision needs the layers only near the drone (a ``GridWindow``). A layer registered
+with ``windowed=True`` takes a ``window`` keyword and computes just those cells (the same
+values as the whole grid's); any other layer is computed whole and cut to the window.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy as np
 
 from layerpilot.layers import features
 from layerpilot.layers.layerset import LayerSet
+from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
 
 
@@ -50,11 +55,17 @@ class LayerContext:
 
 LayerFunction = Callable[[ColumnLayers, Any, LayerContext], np.ndarray]
 _REGISTRY: dict[str, LayerFunction] = {}
+_WINDOWED: set[str] = set()  # layers whose function takes a ``window`` keyword
 RESERVED = frozenset({"color", "observed", "elevation_m"})
 
 
-def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool = False) -> Any:
-    """Add a layer under ``name``; usable as ``register_layer(name, fn)`` or ``@register_layer(name)``."""
+def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool = False,
+                   windowed: bool = False) -> Any:
+    """Add a layer under ``name``; usable as ``register_layer(name, fn)`` or ``@register_layer(name)``.
+
+    ``windowed``: ``fn`` also takes ``window=`` (a ``GridWindow`` or None) and then returns
+    only those cells.
+    """
     if not name.isidentifier() or name in RESERVED:
         raise ValueError(f"name: {name!r} must be a Python-identifier-like word and not one of {sorted(RESERVED)}")
 
@@ -62,6 +73,9 @@ def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool 
         if name in _REGISTRY and _REGISTRY[name] is not f and not replace:
             raise ValueError(f"name: a layer {name!r} is already registered (pass replace=True to override)")
         _REGISTRY[name] = f
+        _WINDOWED.discard(name)
+        if windowed:
+            _WINDOWED.add(name)
         return f
 
     return add if fn is None else add(fn)
@@ -69,6 +83,7 @@ def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool 
 
 def unregister_layer(name: str) -> None:
     _REGISTRY.pop(name, None)
+    _WINDOWED.discard(name)
 
 
 def layer_names() -> list[str]:
@@ -104,13 +119,17 @@ def compute_layers(
     context: LayerContext,
     names: Iterable[str] | None = None,
     voxel_map: Any = None,
+    window: GridWindow | None = None,
 ) -> LayerSet:
-    """Compute the named layers (default: every registered one) into a checked LayerSet."""
+    """Compute the named layers (default: every registered one) into a checked LayerSet.
+
+    ``window``: only those cells of each layer (see the module docstring).
+    """
     names = layer_names() if names is None else list(dict.fromkeys(names))
     unknown = [n for n in names if n not in _REGISTRY]
     if unknown:
         raise ValueError(f"names: no layer named {', '.join(map(repr, unknown))}; known: {', '.join(_REGISTRY)}")
-    layers = {name: _REGISTRY[name](columns, voxel_map, context) for name in names}  # LayerSet checks them
+    layers = {name: _layer(name, columns, voxel_map, context, window) for name in names}  # LayerSet checks them
     return LayerSet(
         columns.geometry,
         layers,
@@ -118,10 +137,28 @@ def compute_layers(
         columns.elevation,  # NaN where unobserved (ColumnLayers' contract)
         columns.color,
         context.now,
+        window,
     )
 
 
-register_layer("fringe", lambda c, m, ctx: features.fringe(c.observed, ctx.options.fringe_closing))
-register_layer("time", lambda c, m, ctx: features.time_since_seen(c.observed, c.last_seen, ctx.now))
-register_layer("distance", lambda c, m, ctx: features.min_distance(c.observed, c.min_distance, ctx.options.max_distance))
-register_layer("elevation", lambda c, m, ctx: features.elevation(c.observed, c.elevation))
+def _layer(name: str, columns: ColumnLayers, voxel_map: Any, context: LayerContext,
+           window: GridWindow | None) -> np.ndarray:
+    fn = _REGISTRY[name]
+    if window is None:
+        return fn(columns, voxel_map, context)
+    if name in _WINDOWED:
+        return fn(columns, voxel_map, context, window=window)
+    whole = fn(columns, voxel_map, context)
+    if not isinstance(whole, np.ndarray) or whole.shape != columns.geometry.shape:
+        return whole  # LayerSet names the layer and what is wrong with it
+    return whole[window.slices]
+
+
+register_layer("fringe", lambda c, m, ctx, window=None: features.fringe(c.observed, ctx.options.fringe_closing,
+                                                                        window), windowed=True)
+register_layer("time", lambda c, m, ctx, window=None: features.time_since_seen(c.observed, c.last_seen, ctx.now,
+                                                                              window), windowed=True)
+register_layer("distance", lambda c, m, ctx, window=None: features.min_distance(
+    c.observed, c.min_distance, ctx.options.max_distance, window), windowed=True)
+register_layer("elevation", lambda c, m, ctx, window=None: features.elevation(c.observed, c.elevation, window),
+               windowed=True)

@@ -22,6 +22,7 @@ from layerpilot.decide.behavior import Behavior, load_behavior
 from layerpilot.decide.decision import Decision
 from layerpilot.decide.maker import DecisionMaker
 from layerpilot.layers import LayerContext, compute_layers
+from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
 
 PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
@@ -138,7 +139,8 @@ class Pilot:
                 return None
             self.evaluations += 1
             self._reconsidered = columns
-            decision = self.maker.decide(self._layers(columns, position, time), position, time, avoid=avoid)
+            decision = self.maker.decide(self._layers(columns, position, time), position, time, avoid=avoid,
+                                         widen=lambda window: self._layers(columns, position, time, window))
             return self._from_decision(decision, position, time, reason)
         if not self.retargets or columns is None or columns is self._reconsidered:
             return None
@@ -150,10 +152,13 @@ class Pilot:
     def _conflicts(self, points: Sequence[Sequence[float]]) -> bool:
         return any(math.hypot(p[0] - self.target[0], p[1] - self.target[1]) < self.behavior.r_e for p in points)
 
-    def _layers(self, columns: ColumnLayers, position: Sequence[float], time: float):
+    def _layers(self, columns: ColumnLayers, position: Sequence[float], time: float,
+                window: GridWindow | None = None):
+        """The behavior's layers on the cells this tick can choose from (the maker's window), not the whole grid."""
+        window = self.maker.window(columns.geometry, position) if window is None else window
         context = LayerContext(now=time, home=self.cfg.home, position=tuple(float(v) for v in position[:3]),
                                options=self.behavior.layers)
-        return compute_layers(columns, context, self.behavior.layer_names)
+        return compute_layers(columns, context, self.behavior.layer_names, window=window)
 
     def _from_decision(self, d: Decision, position: Sequence[float], time: float, reason: str) -> Command:
         wp = tuple(float(v) for v in d.waypoint)
