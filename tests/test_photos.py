@@ -1,0 +1,89 @@
+"""Real photos in (issue 17): EXIF/XMP, skipped photos, refinement against the reference cloud, `map images`.
+
+Uses the real DJI Phantom 3 photos in ../shared/data/brighton_beach; expected metadata values were
+read by hand with exifread and from the XMP packet of DJI_0018.JPG.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from layerpilot.cli import main as cli_main
+from layerpilot.eval.surface import read_reference, score_points
+from layerpilot.photos import PhotoConfig, PhotoStereo, read_folder, read_metadata
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "brighton_beach"
+PAIR = ("DJI_0025.JPG", "DJI_0026.JPG")  # second flight line, over the park the reference covers
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    """Two real photos and a copy of one whose EXIF GPS pointer is renamed (a photo without a position)."""
+    d = tmp_path_factory.mktemp("photos")
+    for name in PAIR:
+        shutil.copy(DATA / "images" / name, d / name)
+    data = bytearray((DATA / "images" / "DJI_0024.JPG").read_bytes())
+    at = data.find(b"\x88\x25", 0, 400)  # the GPSInfo tag of IFD0 (big-endian TIFF)
+    assert at > 0
+    data[at + 1] = 0x26
+    (d / "DJI_NOGPS.JPG").write_bytes(bytes(data))
+    return d
+
+
+def test_exif_and_xmp_fields_read_right():
+    m = read_metadata(DATA / "images" / "DJI_0018.JPG")
+    assert (m.make, m.model, m.width, m.height) == ("DJI", "FC300S", 4000, 2250)
+    # GPSLatitude [46, 50, 66771/2000] N, GPSLongitude [91, 59, 101039/2500] W, GPSAltitude 198309/1000
+    assert m.lat == pytest.approx(46 + 50 / 60 + 33.3855 / 3600, abs=1e-9)
+    assert m.lon == pytest.approx(-(91 + 59 / 60 + 40.4156 / 3600), abs=1e-9)
+    assert m.alt == pytest.approx(198.309)
+    assert (m.focal_mm, m.focal_35mm) == (pytest.approx(3.61), 20.0)
+    assert m.focal_px() == pytest.approx(20 / 36 * 4000)
+    assert (m.gimbal_yaw, m.gimbal_pitch, m.gimbal_roll) == (45.0, -89.9, 0.0)
+    assert (m.flight_yaw, m.flight_pitch, m.flight_roll) == (46.0, 1.8, 3.0)
+    assert m.relative_altitude == pytest.approx(39.8)
+
+
+def test_photo_without_gps_is_reported_and_skipped(folder):
+    f = read_folder(folder)
+    assert [p.path.name for p in f.photos] == list(PAIR)
+    assert f.skipped == {"DJI_NOGPS.JPG": "no GPS position in EXIF"}
+    # the origin lies below the first photo at its take-off height: the camera is 40 m above it
+    assert f.frame(0).pose.position == pytest.approx([0.0, 0.0, 40.0], abs=1e-6)
+    assert f.frame(0).optical_axis[2] < -0.99  # nadir
+
+
+def test_refinement_beats_raw_poses_against_the_reference(folder):
+    f = read_folder(folder)
+    frames = list(f.frames())
+    surface = read_reference(DATA / "model.laz", f.origin)
+    scores = {}
+    for refine in (True, False):
+        (pair,) = PhotoStereo(replace(PhotoConfig(), refine=refine)).run(frames)
+        scores[refine] = (score_points(surface, pair.cloud.points), pair)
+    refined, raw = scores[True][0], scores[False][0]
+    r = scores[True][1].refinement
+    assert r.reason == "ok_heading_flipped" and r.inliers > 300 and r.rotation_correction_deg < 3
+    assert refined.scored > 20000 and refined.within_1m > 0.9
+    assert raw.within_1m < 0.2
+    assert scores[True][1].coverage > 3 * scores[False][1].coverage
+
+
+def test_map_images_writes_the_run_directory(folder, tmp_path, capsys):
+    out = tmp_path / "run"
+    cli_main(["map", "images", str(folder), "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert "skipped DJI_NOGPS.JPG: no GPS position in EXIF" in printed
+    for name in ("map.ot", "map.bt", "frame.json", "cameras.csv", "pairs.csv", "report.html", "metrics.json",
+                 "plots/cameras.png", "plots/layers/color.png", "plots/layers/elevation_m.png"):
+        assert (out / name).stat().st_size > 0, name
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["final"]["accepted"] == 1 and metrics["final"]["observed_columns"] > 1000
+    cameras = np.genfromtxt(out / "cameras.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    assert len(cameras) == 2 and cameras["lat"][0] == pytest.approx(read_metadata(folder / PAIR[0]).lat, abs=1e-7)
