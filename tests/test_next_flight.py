@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 
 import numpy as np
 import pytest
@@ -16,14 +17,23 @@ from layerpilot.decide import area_geometry, load_behavior
 from layerpilot.decide.next_flight import plan_next_flight
 from layerpilot.geodesy import LocalFrame
 from layerpilot.link.connection import open_connection
-from layerpilot.link.mission_transfer import MissionItem, MissionTransferError, download_mission, upload_mission
-from layerpilot.link.qgc_plan import plan_items, read_plan
+from layerpilot.link.mission_transfer import MissionItem, MissionTransferError, upload_mission
+from layerpilot.link.qgc_plan import read_plan
 from layerpilot.map import VoxelMap
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 
 ORIGIN = (47.397742, 8.545594, 488.0)  # the simulated vehicle's home (its default geodetic origin)
 FRAME = LocalFrame(*ORIGIN)
+
+
+def same_item(a: MissionItem, b: MissionItem) -> bool:
+    """Equal after the wire's rounding (1e-7 degrees, float32 altitude and params; NaN equals NaN)."""
+    def close(u: float, v: float, tol: float) -> bool:
+        return (math.isnan(u) and math.isnan(v)) or abs(u - v) <= tol
+    return ((a.command, a.frame, a.autocontinue) == (b.command, b.frame, b.autocontinue)
+            and close(a.lat, b.lat, 1.5e-7) and close(a.lon, b.lon, 1.5e-7) and close(a.alt, b.alt, 1e-4)
+            and all(close(u, v, 1e-5) for u, v in zip(a.params, b.params)))
 
 
 def half_seen_map() -> VoxelMap:
@@ -91,11 +101,16 @@ def test_the_plan_file_is_what_qgroundcontrol_reads(planned):
     assert read_plan(planned).items[0].lat == doc["mission"]["items"][0]["params"][4]
 
 
+def start_vehicle(flavour: str = "ardupilot") -> tuple[MavlinkVehicle, str]:
+    endpoint = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 0.0), ground_z=0.0), "tcp:127.0.0.1:0",
+                              EndpointConfig(flavour=flavour)).start(speed=10.0)
+    return endpoint, f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
+
+
 @pytest.fixture
 def vehicle():
-    endpoint = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 0.0), ground_z=0.0), "tcp:127.0.0.1:0",
-                              EndpointConfig()).start(speed=10.0)
-    yield endpoint, f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
+    endpoint, url = start_vehicle()
+    yield endpoint, url
     endpoint.stop()
 
 
@@ -106,23 +121,24 @@ def gcs(url: str):
     return conn, (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
 
 
-def test_upload_then_download_gives_the_same_items(planned, vehicle, capsys):
-    endpoint, url = vehicle
-    assert main(["link", "--mavlink", url, "--timeout", "10", "upload", str(planned)]) == 0
-    plan = read_plan(planned)
-    assert f"upload: {len(plan.items)} mission items accepted by system 1" in capsys.readouterr().out
-    conn, target = gcs(url)
+@pytest.mark.parametrize("flavour", ["ardupilot", "px4"])
+def test_upload_then_download_gives_the_same_items(planned, flavour, tmp_path, capsys):
+    endpoint, url = start_vehicle(flavour)
     try:
-        downloaded = download_mission(conn, target, timeout=1.0)
+        assert main(["link", "--mavlink", url, "--timeout", "10", "upload", str(planned)]) == 0
+        plan = read_plan(planned)
+        assert f"upload: {len(plan.items)} mission items accepted by system 1" in capsys.readouterr().out
+        # what the vehicle stores: ArduPilot keeps home as item 0, PX4 the plan's items alone
+        stored = endpoint.mission.items
+        assert len(stored) == len(plan.items) + (flavour == "ardupilot")
+        assert main(["link", "--mavlink", url, "--timeout", "10", "download", str(tmp_path / "back.plan")]) == 0
     finally:
-        conn.close()
-    assert len(downloaded) == len(plan.items) + 1  # ArduPilot keeps home as item 0
-    home = downloaded[0]
-    assert (home.frame, home.lat, home.lon, home.alt) == (0, pytest.approx(ORIGIN[0], abs=1e-7),
-                                                          pytest.approx(ORIGIN[1], abs=1e-7), ORIGIN[2])
-    back = plan_items(downloaded, mav.MAV_AUTOPILOT_ARDUPILOTMEGA)
-    assert all(a.same_as(b) for a, b in zip(plan.items, back))
-    assert math.isnan(back[0].params[3]) and back[-1].alt == 50.0
+        endpoint.stop()
+    back = read_plan(tmp_path / "back.plan")
+    assert back.firmware == flavour and len(back.items) == len(plan.items)
+    assert all(same_item(a, b) for a, b in zip(plan.items, back.items))
+    assert back.home == pytest.approx(ORIGIN, abs=2e-7)  # ArduPilot: its item 0; PX4: its HOME_POSITION
+    assert math.isnan(back.items[0].params[3]) and back.items[-1].alt == 50.0
 
 
 def test_a_vehicle_that_stops_answering_fails_the_upload_with_a_clear_error(vehicle):
@@ -156,3 +172,12 @@ def test_a_broken_plan_file_is_a_clear_error(tmp_path, capsys):
                                                                "items": [{"type": "ComplexItem"}]}}))
     assert main(["link", "--mavlink", "tcp:127.0.0.1:5760", "upload", str(bad)]) == 2
     assert "only SimpleItem is supported" in capsys.readouterr().err
+
+
+def test_no_autopilot_on_the_link_is_a_one_line_error(planned, capsys):
+    with socket.socket() as silent:  # accepts connections (the kernel's backlog) and never says anything
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        url = f"tcp:127.0.0.1:{silent.getsockname()[1]}"
+        assert main(["link", "--mavlink", url, "--timeout", "0.3", "upload", str(planned)]) == 1
+    assert capsys.readouterr().err == f"layerpilot link upload: error: no autopilot HEARTBEAT on {url} within 0.3 s\n"

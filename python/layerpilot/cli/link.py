@@ -1,9 +1,10 @@
 """`layerpilot link`: the link node, or one action for bench tests on a real autopilot or SITL
-(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`, `upload PLAN`)."""
+(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`, `upload PLAN`, `download PLAN`)."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from layerpilot.cli.nodes import Running, add_node_command
 
@@ -36,11 +37,15 @@ def register(commands: argparse._SubParsersAction) -> None:
         action.set_defaults(func=_act)
     upload = sub.add_parser("upload", help="upload a QGroundControl .plan as the vehicle's mission "
                             "(MISSION_ITEM_INT protocol) and wait for its MISSION_ACK")
-    upload.add_argument("plan", help=".plan file (e.g. from `layerpilot plan next`)")
-    upload.add_argument("--item-timeout", type=float, default=1.5,
-                        help="seconds to wait for each answer of the vehicle before sending again (default 1.5)")
-    upload.add_argument("--retries", type=int, default=3, help="sends again per answer before giving up (default 3)")
-    upload.set_defaults(func=_upload)
+    upload.add_argument("plan", type=Path, help=".plan file (e.g. from `layerpilot plan next`)")
+    download = sub.add_parser("download", help="read the vehicle's mission back into a QGroundControl .plan")
+    download.add_argument("plan", type=Path, help=".plan file to write")
+    for transfer in (upload, download):
+        transfer.add_argument("--item-timeout", type=float, default=1.5,
+                              help="seconds to wait for each answer of the vehicle before sending again (default 1.5)")
+        transfer.add_argument("--retries", type=int, default=3,
+                              help="sends again per answer before giving up (default 3)")
+        transfer.set_defaults(func=_transfer)
 
 
 LINK_FLAGS = {"mavlink": "link.link.url", "sysid": "link.link.source_system", "compid": "link.link.source_component",
@@ -149,37 +154,55 @@ def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence) -
     return 0
 
 
-def _upload(args: argparse.Namespace) -> int:
-    """Upload a .plan: exit 0 once the vehicle accepted it, 1 with one line on stderr when it did not answer or
-    refused (2 for a bad flag or a bad file, from main)."""
+def _transfer(args: argparse.Namespace) -> int:
+    """Upload or download a .plan: exit 0 once done, 1 with one line on stderr when the vehicle did not answer
+    or refused (2 for a bad flag or a bad file, from main)."""
     import sys
 
     from layerpilot.cli.nodes import mission_from_args
     from layerpilot.link.connection import open_connection
-    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission
-    from layerpilot.link.qgc_plan import mission_items, read_plan
+    from layerpilot.link.mission_transfer import MissionTransferError, download_mission, upload_mission
+    from layerpilot.link.qgc_plan import mission_items, plan_from_mission, read_plan, write_plan
 
     if not args.item_timeout > 0 or args.retries < 0:
         raise ValueError(f"--item-timeout must be > 0 and --retries >= 0, got {args.item_timeout}, {args.retries}")
-    plan = read_plan(args.plan)
+    action = args.link_command
+    plan = read_plan(args.plan) if action == "upload" else None
     mission = mission_from_args(args, LINK_FLAGS)
     config = link_settings(args, mission, args.vehicle or mission.vehicles[0]).link
     wait = config.connect_timeout_s if args.timeout is None else args.timeout
+    bounds = {"timeout": args.item_timeout, "retries": args.retries}
     conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
     try:
         heartbeat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=wait,
                                     condition="HEARTBEAT.autopilot != 8")  # 8: MAV_AUTOPILOT_INVALID (a GCS)
         if heartbeat is None:
-            print(f"layerpilot link upload: error: no autopilot HEARTBEAT on {config.url} within {wait:g} s",
-                  file=sys.stderr, flush=True)
-            return 1
+            raise MissionTransferError(f"no autopilot HEARTBEAT on {config.url} within {wait:g} s")
         target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
-        upload_mission(conn, mission_items(plan, heartbeat.autopilot), target, timeout=args.item_timeout,
-                       retries=args.retries)
+        if plan is not None:
+            upload_mission(conn, mission_items(plan, heartbeat.autopilot), target, **bounds)
+        else:
+            items = download_mission(conn, target, **bounds)
+            plan = plan_from_mission(items, heartbeat.autopilot, _home(conn, heartbeat.autopilot, wait))
+            write_plan(args.plan, plan)
     except MissionTransferError as exc:
-        print(f"layerpilot link upload: error: {exc}", file=sys.stderr, flush=True)
+        print(f"layerpilot link {action}: error: {exc}", file=sys.stderr, flush=True)
         return 1
     finally:
         conn.close()
-    print(f"upload: {len(plan.items)} mission items accepted by system {target[0]} on {config.url}")
+    done = "accepted by" if action == "upload" else f"written to {args.plan} from"
+    print(f"{action}: {len(plan.items)} mission items {done} system {target[0]} on {config.url}")
     return 0
+
+
+def _home(conn, autopilot: int, wait: float) -> tuple[float, float, float] | None:
+    """Home from the vehicle's HOME_POSITION (not needed for ArduPilot, whose mission item 0 is home)."""
+    from layerpilot.link.mission_transfer import MissionTransferError
+    from layerpilot.link.qgc_plan import ARDUPILOT
+
+    if autopilot == ARDUPILOT:
+        return None
+    msg = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=wait)
+    if msg is None:
+        raise MissionTransferError(f"no HOME_POSITION within {wait:g} s (the .plan needs the home)")
+    return (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)

@@ -66,16 +66,6 @@ class MissionItem:
                    (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4)),
                    bool(msg.autocontinue))
 
-    def same_as(self, other: "MissionItem") -> bool:
-        """Equal after the wire's rounding (1e-7 degrees, float32 altitude and params; NaN equals NaN)."""
-        def close(a: float, b: float, tol: float) -> bool:
-            return (math.isnan(a) and math.isnan(b)) or abs(a - b) <= tol
-        return (self.command == other.command and self.frame == other.frame
-                and self.autocontinue == other.autocontinue
-                and close(self.lat, other.lat, 1.5e-7) and close(self.lon, other.lon, 1.5e-7)
-                and close(self.alt, other.alt, 1e-4 * max(1.0, abs(self.alt)))
-                and all(close(a, b, 1e-5 * max(1.0, abs(a))) for a, b in zip(self.params, other.params)))
-
 
 def result_name(result: int) -> str:
     entry = mav.enums["MAV_MISSION_RESULT"].get(result)

@@ -24,9 +24,9 @@ import numpy as np
 from layerpilot.geodesy import LocalFrame
 from layerpilot.link.mission_transfer import GLOBAL, GLOBAL_RELATIVE_ALT, NAV_WAYPOINT, MissionItem
 
-FIRMWARE = {"ardupilot": 3, "px4": 12, "generic": 0}  # MAV_AUTOPILOT as QGC records it
+FIRMWARE = {"ardupilot": 3, "px4": 12, "generic": 0}  # MAV_AUTOPILOT, which QGC records as firmwareType
 QUADROTOR = 2  # MAV_TYPE
-ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
+ARDUPILOT, PX4 = 3, 12  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
 
 
 @dataclass(frozen=True)
@@ -123,6 +123,16 @@ def mission_items(plan: Plan, autopilot: int) -> list[MissionItem]:
     return [MissionItem(lat, lon, alt, frame=GLOBAL, params=(0.0, 0.0, 0.0, 0.0)), *plan.items]
 
 
-def plan_items(downloaded: list[MissionItem], autopilot: int) -> list[MissionItem]:
-    """The inverse of :func:`mission_items`: a downloaded mission without ArduPilot's home item."""
-    return downloaded[1:] if autopilot == ARDUPILOT else downloaded
+def plan_from_mission(downloaded: list[MissionItem], autopilot: int,
+                      home: tuple[float, float, float] | None = None) -> Plan:
+    """The inverse of :func:`mission_items`: a downloaded mission as a plan (ArduPilot's item 0 is its home;
+    other autopilots' home comes from their HOME_POSITION, ``home``)."""
+    firmware = {ARDUPILOT: "ardupilot", PX4: "px4"}.get(autopilot, "generic")
+    if autopilot == ARDUPILOT:
+        if not downloaded:
+            raise ValueError("mission: ArduPilot always holds home as item 0; the vehicle sent no items")
+        first = downloaded[0]
+        return Plan(downloaded[1:], (first.lat, first.lon, first.alt), firmware)
+    if home is None:
+        raise ValueError("home: needed for a mission from an autopilot other than ArduPilot")
+    return Plan(list(downloaded), home, firmware)
