@@ -253,12 +253,16 @@ class Decision:
     score: float
     terms: tuple[Term, ...]
     behavior: str = ""
+    runner_up: np.ndarray | None = None  # (3,) the second-best choice, if any
+    explanation: str = ""  # one line a person can read
 
 
 def encode_decision(d: Decision) -> bytes:
     m = pb.Decision(stamp=float(d.stamp), vehicle=check_vehicle(d.vehicle), seq=int(d.seq), score=float(d.score),
-                    behavior=str(d.behavior))
+                    behavior=str(d.behavior), explanation=str(d.explanation))
     _set_vec(m.waypoint, d.waypoint)
+    if d.runner_up is not None:
+        _set_vec(m.runner_up, d.runner_up)
     for t in d.terms:
         m.terms.add(name=t.name, weight=float(t.weight), value=float(t.value), contribution=float(t.contribution))
     return m.SerializeToString()
@@ -271,8 +275,9 @@ def decode_decision(payload: bytes) -> Decision:
         for attr in ("weight", "value", "contribution"):
             _finite(getattr(t, attr), f"terms[{i}].{attr}")
         terms.append(Term(t.name, t.weight, t.value, t.contribution))
+    runner_up = _vec(m.runner_up, "runner_up") if m.HasField("runner_up") else None
     return Decision(_finite(m.stamp, "stamp"), _vehicle(m), m.seq, _vec(m.waypoint, "waypoint"),
-                    _finite(m.score, "score"), tuple(terms), m.behavior)
+                    _finite(m.score, "score"), tuple(terms), m.behavior, runner_up, m.explanation)
 
 
 # --- mission state --------------------------------------------------------------------------

@@ -47,6 +47,10 @@ def register(commands: argparse._SubParsersAction) -> None:
     demo.add_argument("--behavior", help="preset, .toml path, or pattern (lawnmower, orbit) (decide.behavior)")
     demo.add_argument("--seed", type=int, help="decision seed (decide.seed)")
     demo.add_argument("--name", default=None, help="run directory name (default: demo-BEHAVIOR)")
+    demo.add_argument("--view", nargs="?", const="native", choices=["native", "web"],
+                      help="show the mission in Rerun as it flies: the native viewer, or `web` on localhost")
+    demo.add_argument("--web-port", type=int, default=9090, help="--view web: the viewer page's port (default 9090)")
+    demo.add_argument("--no-rrd", action="store_true", help="do not save the run's Rerun recording (mission.rrd)")
     _mission_options(demo)
     demo.set_defaults(func=_demo)
 
@@ -83,23 +87,40 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
 
 
 def _demo(args: argparse.Namespace) -> None:
-    from layerpilot.eval.mission import run_mission
-
     mission = _mission(args)
     behavior, duration = mission.decide.behavior, mission.evaluation.duration
-    result = run_mission(mission, Path(mission.evaluation.out) / (args.name or f"demo-{Path(behavior).stem}"))
+    result = _run(mission, Path(mission.evaluation.out) / (args.name or f"demo-{Path(behavior).stem}"), rrd=not args.no_rrd,
+                  web_port=args.web_port if args.view == "web" else None, spawn=args.view == "native")
     print(_table({behavior: result.final}))
     print(f"{duration:.0f} simulated s in {result.wall_s:.1f} s wall ({duration / result.wall_s:.1f}x real "
           f"time); {result.waypoints} waypoints, {result.frames} frames, {result.clouds} {mission.depth.source} clouds")
     print(f"report: {result.report['html']}")
 
 
-def _one(mission, run_dir: str) -> tuple[str, dict[str, float], float]:
-    """A study mission in a worker process (its progress bar silenced; the parent reports)."""
+def _run(mission, run_dir: str | Path, progress_stream=None, *, rrd: bool = True, web_port: int | None = None,
+         spawn: bool = False):
+    """run_mission with its Rerun recording beside the report (mission.rrd) and, when asked, a live viewer."""
     from layerpilot.eval.mission import run_mission
 
+    view = None
+    if rrd or web_port is not None or spawn:
+        from layerpilot.viz.lockstep import LockstepView
+
+        view = LockstepView.open(Path(run_dir).name, save=Path(run_dir) / "mission.rrd" if rrd else None,
+                                 web_port=web_port, spawn=spawn)
+        if view.url:
+            print(f"viewer: {view.url}", flush=True)
+    try:
+        return run_mission(mission, run_dir, progress_stream, view=view)
+    finally:
+        if view is not None:
+            view.close()
+
+
+def _one(mission, run_dir: str) -> tuple[str, dict[str, float], float]:
+    """A study mission in a worker process (its progress bar silenced; the parent reports)."""
     with open(os.devnull, "w") as quiet:
-        result = run_mission(mission, run_dir, progress_stream=quiet)
+        result = _run(mission, run_dir, progress_stream=quiet)
     return run_dir, result.final, result.wall_s
 
 

@@ -43,6 +43,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
     p.add_argument("--secrets", help="bus.security on: each node's and the operator's credentials go here "
                                      "(mode 0700; default <log-dir>/../bus-secrets)")
+    p.add_argument("--record", help="write every bus message to this MCAP file (`layerpilot replay` reads it)")
     p.add_argument("--operator-can-save", action="store_true",
                    help="the operator's credentials may also query map/save (bus.operator_can_save)")
     p.set_defaults(func=_up)
@@ -218,5 +219,5 @@ def _up(args: argparse.Namespace) -> int:
     from layerpilot.nodes.up import up
 
     return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
-              log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save)
+              log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save, record=args.record)
 

@@ -113,8 +113,11 @@ def _json_default(value):
 
 
 def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
-                record_inputs: bool = False) -> MissionResult:
-    """Fly the mission's first vehicle and write the run directory (report, metrics, plots, maps, decisions)."""
+                record_inputs: bool = False, view=None) -> MissionResult:
+    """Fly the mission's first vehicle and write the run directory (report, metrics, plots, maps, decisions).
+
+    ``view``: a ``viz.lockstep.LockstepView`` that is shown the run as it flies (None: no view, no rerun).
+    """
     from layerpilot.bus import layerset as wire
     from layerpilot.decide import area_geometry, zone_mask
     from layerpilot.depth.source import GroundTruthDepth
@@ -136,6 +139,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     home = mission.decide.home
     geometry = area_geometry(pilot.behavior.area, home, resolution=mission.map_server.resolution)
     aoi = zone_mask(pilot.behavior.area, geometry, home) > 0.5
+    if view is not None:
+        view.start(pilot.behavior, home, geometry)
     xmin, xmax, ymin, ymax = geometry.extent
     box_min, box_max = np.array([xmin, ymin, -1000.0]), np.array([xmax, ymax, 1000.0])
     sampler = SeriesSampler(METRICS, SAMPLE_INTERVAL)
@@ -186,17 +191,22 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                         if link.refused[exc.kind] == 1:
                             logging.getLogger("layerpilot.eval").warning("waypoint refused by the link: %s", exc)
                     records.append(record)
+                    if view is not None:
+                        view.decision(t, record)
                 if t >= next_frame - 1e-9:
                     next_frame += frame_period
                     pose = sim.endpoint.pose()
                     frame = sim.renderer.render_vehicle(pose.position, pose.yaw, t).seen_from(origin)
                     frames += 1
                     path.append(tuple(float(c) for c in (pose.position - origin)[:2]))
+                    if view is not None:
+                        view.frame(t, frame, pose.position - origin, service.map)
                     if (cloud := depth.push(frame)) is not None:
                         service.insert(cloud.points, cloud.origin, cloud.colors, t, mission.depth.max_depth)
                     if (reference := truth.push(frame)) is not None and len(reference):
                         gt.insert(reference.points, reference.origin, reference.colors, stamp=t)
-                sampler.maybe_sample(t, lambda: metrics(t))
+                if sampler.maybe_sample(t, lambda: metrics(t)) and view is not None:
+                    view.metrics(t, sampler.series.last())
                 last = sampler.series.last() if len(sampler.series) else {}
                 progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(records)}")
                 if t >= ev.duration - 1e-9:

@@ -45,7 +45,9 @@ def decision_message(command: Command, vehicle: str, behavior: str) -> Decision:
                   for n, c in d.contributions.items())
     terms += (Term("zone", 1.0, d.zone, d.zone), Term("preference", 1.0, d.preference, d.preference),
               Term("history", 1.0, d.history, d.history))
-    return Decision(command.time, vehicle, command.seq, np.array(command.position), d.score, terms, behavior)
+    runner_up = None if d.runner_up is None else np.array(d.runner_up.waypoint)
+    return Decision(command.time, vehicle, command.seq, np.array(command.position), d.score, terms, behavior,
+                    runner_up, d.explain())
 
 
 class DecideNode:

@@ -171,8 +171,9 @@ class Supervisor:
 
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
        duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
-       operator_can_save: bool = False) -> int:
-    """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``)."""
+       operator_can_save: bool = False, record: str | Path | None = None) -> int:
+    """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``);
+    ``record``: an MCAP file every bus message is written to (bus/recording.py)."""
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
     from layerpilot.nodes.runner import bus_config
@@ -189,6 +190,11 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
     sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets), Path(log_dir))
+    recorder = None
+    if record is not None:  # listening before any node starts: the recording misses no cloud
+        from layerpilot.bus.recording import Recorder
+
+        recorder = Recorder(session, record, path.read_text())
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/", flush=True)
@@ -211,6 +217,8 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
                 break
     finally:
         sup.stop()
+        if recorder is not None:
+            print("layerpilot up: recorded " + json.dumps(recorder.stop()), flush=True)
         session.close()
     print("layerpilot up: stopped " + ", ".join(f"{n.name} ({n.proc.returncode})" for n in sup.nodes), flush=True)
     return 0

@@ -1,0 +1,178 @@
+"""`layerpilot view`: join a running mission on the bus and log what it says into a MissionScene.
+
+Zenoh callbacks only decode and keep the newest message per key (and count arrivals, for the
+rates); one worker logs them every ``period`` seconds, asks the map server for its voxels and
+statistics every ``map_period`` seconds, and turns each layer set into layer images and metrics.
+A bad message is rejected and counted like in any node; the view never publishes anything.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+
+import numpy as np
+import zenoh
+
+from layerpilot.bus import arrays, keys
+from layerpilot.bus import messages as msg
+from layerpilot.bus.layerset import decode_layer_set, to_column_layers
+from layerpilot.bus.proto_gen import messages_pb2 as pb
+from layerpilot.bus.reject import BadMessage, Rejects
+from layerpilot.decide import zone_mask
+from layerpilot.map.columns import ColumnLayers
+from layerpilot.map.voxel_map import Voxels
+from layerpilot.mission.config import Mission
+from layerpilot.mission.pilot import load_pilot_behavior
+from layerpilot.viz.scene import MissionScene, area_outline
+
+_log = logging.getLogger("layerpilot.view")
+DECODERS = {"camera": msg.decode_frame, "pose": msg.decode_state, "layers": decode_layer_set,
+            "decision": msg.decode_decision, "waypoint": msg.decode_waypoint, "state": msg.decode_mission_state,
+            "cloud": msg.decode_cloud}
+VOXEL_BOX = 500  # voxels per side of the box the view asks the map server for
+Metrics = Callable[[ColumnLayers, np.ndarray, float], dict[str, float]]
+
+
+class LiveView:
+    """The scene of one vehicle of a running mission (``metrics``: layers, area mask, now -> named values)."""
+
+    def __init__(self, session: zenoh.Session, mission: Mission, scene: MissionScene, vehicle: str | None = None,
+                 metrics: Metrics | None = None, period: float = 0.2, map_period: float = 2.0) -> None:
+        self.session, self.mission, self.scene, self.metrics = session, mission, scene, metrics
+        self.vehicle = vehicle or mission.vehicles[0]
+        self.keys = keys.Keys(self.vehicle)
+        self.period, self.map_period = period, map_period
+        self.behavior = load_pilot_behavior(mission.decide.behavior)
+        self.rejects = Rejects(_log)
+        self.heard: Counter[str] = Counter()  # messages per topic of this vehicle
+        self.logged: Counter[str] = Counter()  # what went into the scene, per kind
+        self._newest: dict[str, object] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._now = 0.0  # newest mission time heard
+        self._aoi: tuple[object, np.ndarray] | None = None
+        self._sub = None
+        self._thread = threading.Thread(target=self._run, name="view", daemon=True)
+
+    def start(self) -> None:
+        self.scene.area(area_outline(self.behavior.area.shape, self.behavior.area.radius,
+                                     self.behavior.area.center or self.mission.decide.home,
+                                     self.behavior.area.polygon))
+        self._sub = self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/*", self._on_sample)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._sub is not None:
+            self._sub.undeclare()
+        self._thread.join()
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        topic = key.rsplit("/", 1)[-1]
+        if topic not in DECODERS or topic == "cloud":  # clouds are the map server's: the view shows its map
+            return
+        try:
+            message = DECODERS[topic](sample.payload.to_bytes())
+        except BadMessage as exc:
+            self.rejects.reject(key, exc)
+            return
+        with self._lock:
+            self.heard[topic] += 1
+            self._newest[topic] = message
+            if topic == "pose":  # every pose: the path is drawn from all of them
+                self._newest.setdefault("poses", []).append(message)
+
+    def _run(self) -> None:
+        next_map, last_rates, last_counts = 0.0, time.monotonic(), Counter()
+        while not self._stop.wait(self.period):
+            with self._lock:
+                newest, self._newest = self._newest, {}
+                counts = self.heard.copy()
+            try:
+                self._log_messages(newest)
+                now = time.monotonic()
+                if now >= next_map:
+                    next_map = now + self.map_period
+                    self._log_map()
+                    rates = {f"rate/{t}": (counts[t] - last_counts[t]) / (now - last_rates) for t in counts}
+                    self.scene.scalars("health", {**rates, "view/rejected": self.rejects.total})
+                    last_rates, last_counts = now, counts
+            except Exception as exc:  # the view keeps going; the first failure of a kind is logged
+                self.rejects.reject("view", BadMessage(f"logging failed ({type(exc).__name__})", str(exc)))
+
+    def _log_messages(self, newest: dict) -> None:
+        for state in newest.get("poses", []):
+            self._now = max(self._now, state.stamp)
+            self.scene.at(state.stamp)
+            self.scene.pose(state.pose)
+            self.logged["pose"] += 1
+        if (frame := newest.get("camera")) is not None:
+            self.scene.at(frame.frame.stamp)
+            self.scene.camera(frame.frame)
+            self.logged["camera"] += 1
+        if (d := newest.get("decision")) is not None:
+            self.scene.at(d.stamp)
+            self.scene.decision(d.waypoint, d.runner_up, d.explanation or f"{d.behavior} waypoint {d.seq}: "
+                                f"({d.waypoint[0]:.1f}, {d.waypoint[1]:.1f}, {d.waypoint[2]:.1f}) score {d.score:.4f}")
+            self.logged["decision"] += 1
+        if (ls := newest.get("layers")) is not None:
+            columns = to_column_layers(ls)
+            self.scene.at(max(self._now, ls.stamp))
+            self.scene.layers({"color": columns.color, "elevation": np.where(columns.observed, columns.elevation,
+                                                                             np.nan),
+                               "time_since_seen": np.where(columns.observed, self._now - columns.last_seen, np.nan),
+                               "distance": np.where(columns.observed, columns.min_distance, np.nan)},
+                              columns.geometry)
+            if self.metrics is not None:
+                self.scene.scalars("metrics", self.metrics(columns, self._area(columns), max(self._now, ls.stamp)))
+            self.logged["layers"] += 1
+
+    def _area(self, columns: ColumnLayers) -> np.ndarray:
+        if self._aoi is None or self._aoi[0] != columns.geometry:
+            mask = zone_mask(self.behavior.area, columns.geometry, self.mission.decide.home) > 0.5
+            self._aoi = (columns.geometry, mask)
+        return self._aoi[1]
+
+    def _log_map(self) -> None:
+        """The map server's occupied voxels in its layer window (paged) and its statistics."""
+        x, y, w, h = self.mission.map_server.window
+        res = self.mission.map_server.resolution
+        span = VOXEL_BOX * res  # the map service answers boxes of at most MAX_BOX voxels a side
+        lo, hi = (x, y, -0.2 * span), (x + min(w, VOXEL_BOX) * res, y + min(h, VOXEL_BOX) * res, 0.8 * span)
+        pages, offset, total = [], 0, None
+        while total is None or offset < total:
+            reply = self._query(self.keys.service("voxels"), f"min={','.join(map(str, lo))};"
+                                f"max={','.join(map(str, hi))};offset={offset}")
+            if reply is None:
+                return
+            m = pb.VoxelSet.FromString(reply)
+            centers = arrays.from_proto(m.centers, "centers", dtype="float32", shape=(None, 3))
+            if len(centers) == 0:
+                break
+            pages.append(Voxels(centers, arrays.from_proto(m.occupancy, "occupancy", dtype="float32"),
+                                arrays.from_proto(m.color, "color", dtype="uint8", shape=(len(centers), 3)),
+                                arrays.from_proto(m.last_seen, "last_seen", dtype="float64"),
+                                arrays.from_proto(m.min_distance, "min_distance", dtype="float32")))
+            offset, total = m.offset + len(centers), m.total
+        if pages:
+            voxels = Voxels(*(np.concatenate([getattr(p, f) for p in pages]) for f in
+                              ("centers", "occupancy", "color", "last_seen", "min_distance")))
+            self.scene.at(self._now)
+            self.scene.voxels(voxels, self._now, res)
+            self.logged["voxels"] += 1
+        if (reply := self._query(self.keys.service("stats"), "")) is not None:
+            s = pb.MapStats.FromString(reply)
+            self.scene.scalars("health", {f"map/{n}": getattr(s, n) for n in (
+                "clouds_received", "clouds_inserted", "clouds_dropped", "messages_rejected", "leaves")})
+
+    def _query(self, key: str, parameters: str) -> bytes | None:
+        for reply in self.session.get(f"{key}?{parameters}" if parameters else key, timeout=5.0):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+            self.rejects.reject(key, BadMessage("query failed", reply.err.payload.to_string()))
+        return None

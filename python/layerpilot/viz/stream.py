@@ -1,0 +1,49 @@
+"""Where a mission's Rerun recording goes: an .rrd file, the web viewer on localhost, the native viewer.
+
+The web viewer is two local servers: Rerun's gRPC server holding the recording (``grpc_port``) and
+the static viewer page (``web_port``), which connects to it; ``url`` is what a browser opens.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import quote
+
+import rerun as rr
+
+APPLICATION = "layerpilot"
+
+
+@dataclass
+class ViewStream:
+    stream: rr.RecordingStream
+    url: str = ""  # the web viewer's address, when served
+
+    def close(self) -> None:
+        """Flush everything to the sinks (the .rrd gets its footer)."""
+        self.stream.flush()
+        self.stream.disconnect()
+
+
+def open_stream(name: str, *, save: str | Path | None = None, web_port: int | None = None,
+                grpc_port: int = 9876, spawn: bool = False) -> ViewStream:
+    """A recording stream named ``name`` into the asked sinks (any combination; none is a ValueError)."""
+    if save is None and web_port is None and not spawn:
+        raise ValueError("open_stream: give save, web_port or spawn")
+    stream = rr.RecordingStream(APPLICATION, recording_id=name)
+    stream.send_recording_name(name)
+    sinks, url = [], ""
+    if save is not None:
+        Path(save).parent.mkdir(parents=True, exist_ok=True)
+        sinks.append(rr.FileSink(str(save)))
+    if web_port is not None:
+        server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=grpc_port)
+        sinks.append(server)
+        rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=server.uri)
+        url = f"http://127.0.0.1:{web_port}/?url={quote(server.uri, safe='')}"
+    if spawn:
+        rr.spawn(connect=False)
+        sinks.append(rr.GrpcSink())
+    stream.set_sinks(*sinks)
+    return ViewStream(stream, url)
