@@ -135,8 +135,11 @@ PYBIND11_MODULE(_core, m) {
         d["nodes"] = s.nodes;
         d["leaves"] = s.leaves;
         d["occupied_leaves"] = s.occupied_leaves;
+        d["attribute_records"] = s.attribute_records;
         d["tree_bytes"] = s.tree_bytes;
         d["column_index_bytes"] = s.column_index_bytes;
+        d["insert_scratch_bytes"] = s.insert_scratch_bytes;
+        d["total_bytes"] = s.total_bytes;
         d["node_bytes"] = s.node_bytes;
         d["bounds_min"] = py::make_tuple(s.min[0], s.min[1], s.min[2]);
         d["bounds_max"] = py::make_tuple(s.max[0], s.max[1], s.max[2]);
@@ -151,10 +154,9 @@ PYBIND11_MODULE(_core, m) {
       .def("write_bt", [](ReferenceOcTree& r, const std::string& path) { return r.tree.writeBinary(path); });
 
   m.def("_agreement", [](const VoxelMap& a, const ReferenceOcTree& b) {
-    return agreementDict(a.withTree([&](const VoxelTree& t) { return agreement(t, b.tree); }));
+    return agreementDict(agreement(a, b.tree));
   });
   m.def("_agreement", [](const VoxelMap& a, const VoxelMap& b) {
-    return agreementDict(
-        a.withTree([&](const VoxelTree& ta) { return b.withTree([&](const VoxelTree& tb) { return agreement(ta, tb); }); }));
+    return agreementDict(agreement(a, b));
   });
 }

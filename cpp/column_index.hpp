@@ -2,33 +2,33 @@
 // window are a copy out of dense tiles instead of a walk over the octree.
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <unordered_map>
-#include <vector>
 
-#include "voxel_tree.hpp"
+#include "compact_octree.hpp"
 
 namespace layerpilot {
 
+// 16 bytes: how many voxels of the column are occupied, the highest one, and its attributes.
 struct Column {
-  std::vector<uint16_t> occupied_z;  // z keys of voxels above the occupied threshold, ascending
-  int32_t top = -1;                  // highest of them, -1 = none
-  Rgb color;                         // attributes of the top voxel, cached
+  uint16_t occupied = 0;  // voxels above the occupied threshold; 0 = the column shows nothing
+  uint16_t top = 0;       // z key of the highest of them (valid if occupied > 0)
+  Rgb color;              // attributes of the top voxel, cached
   float last_seen = 0.f;
   float min_distance = 0.f;
 
-  void setTopAttributes(const VoxelNode& n) {
-    color = n.color;
-    last_seen = n.last_seen;
-    min_distance = n.min_distance;
+  void setTopAttributes(const Attributes& a) {
+    color = a.color;
+    last_seen = a.last_seen;
+    min_distance = a.min_distance;
   }
 };
+static_assert(sizeof(Column) == 16);
 
 class ColumnIndex {
  public:
-  static constexpr int kTileBits = 6;  // tiles of 64 x 64 columns
+  static constexpr int kTileBits = 3;  // tiles of 8 x 8 columns: little waste where a scan is sparse
   static constexpr int kTileSize = 1 << kTileBits;
 
   Column& at(uint16_t x, uint16_t y) {
@@ -44,31 +44,32 @@ class ColumnIndex {
 
   // A voxel became occupied: returns true if it is now the column's top.
   static bool addOccupied(Column& c, uint16_t z) {
-    auto it = std::lower_bound(c.occupied_z.begin(), c.occupied_z.end(), z);
-    if (it == c.occupied_z.end() || *it != z) c.occupied_z.insert(it, z);
-    if (z > c.top) {
-      c.top = z;
-      return true;
-    }
-    return false;
+    const bool top = c.occupied == 0 || z > c.top;
+    ++c.occupied;
+    if (top) c.top = z;
+    return top;
   }
 
-  // A voxel stopped being occupied: returns true if the top changed (caller refreshes attributes).
-  static bool removeOccupied(Column& c, uint16_t z) {
-    auto it = std::lower_bound(c.occupied_z.begin(), c.occupied_z.end(), z);
-    if (it != c.occupied_z.end() && *it == z) c.occupied_z.erase(it);
+  // A voxel stopped being occupied: returns true if it was the top; the caller then finds the
+  // next one down (`occupied_below(z)`) and refreshes the attributes.
+  template <class OccupiedAt>
+  static bool removeOccupied(Column& c, uint16_t z, OccupiedAt&& occupied_at) {
+    --c.occupied;
     if (z != c.top) return false;
-    c.top = c.occupied_z.empty() ? -1 : c.occupied_z.back();
+    if (c.occupied > 0)
+      for (uint16_t below = z; below-- > 0;)
+        if (occupied_at(below)) {
+          c.top = below;
+          break;
+        }
     return true;
   }
 
   void clear() { tiles_.clear(); }
 
+  // Tiles, the hash table's buckets and nodes (a key, a pointer and a link each).
   size_t memoryBytes() const {
-    size_t bytes = tiles_.size() * (sizeof(Tile) + 32);
-    for (const auto& [id, tile] : tiles_)
-      for (const auto& c : tile->columns) bytes += c.occupied_z.capacity() * sizeof(uint16_t);
-    return bytes;
+    return tiles_.size() * (sizeof(Tile) + 3 * sizeof(void*)) + tiles_.bucket_count() * sizeof(void*);
   }
 
  private:

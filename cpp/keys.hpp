@@ -89,6 +89,7 @@ class FlatKeyIndex {
   }
 
   size_t size() const { return size_; }
+  size_t memoryBytes() const { return keys_.capacity() * sizeof(uint64_t) + values_.capacity() * sizeof(uint32_t); }
 
  private:
   void grow() {
@@ -135,6 +136,8 @@ class SparseBitGrid {
     uint32_t bit = (k[0] & 15) | ((k[1] & 15) << 4) | ((k[2] & 15) << 8);
     return blocks_[*index].words[bit >> 6] & (1ULL << (bit & 63));
   }
+
+  size_t memoryBytes() const { return sizeof(*this) + index_.memoryBytes() + blocks_.size() * sizeof(Block); }
 
  private:
   struct Block {

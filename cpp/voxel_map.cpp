@@ -39,7 +39,7 @@ void parallelChunks(size_t n, unsigned workers, F&& f) {
 // OctoMap's computeRayKeys (Amanatides & Woo) with the same float/double arithmetic, so the keys
 // match OctoMap's exactly, but with the state in registers and keys emitted to a sink.
 template <class Sink>
-bool walkRay(const VoxelTree& tree, const point3d& origin, const point3d& end, Sink&& sink) {
+bool walkRay(const octomap::OcTree& tree, const point3d& origin, const point3d& end, Sink&& sink) {
   OcTreeKey key_origin, key_end;
   if (!tree.coordToKeyChecked(origin, key_origin) || !tree.coordToKeyChecked(end, key_end)) return false;
   if (key_origin == key_end) return true;
@@ -89,8 +89,10 @@ inline unsigned childAt(uint64_t code, unsigned depth) { return (code >> (3 * (1
 
 }  // namespace
 
-VoxelMap::VoxelMap(double resolution, const SensorModel& model) : model_(model), tree_(resolution) {
+VoxelMap::VoxelMap(double resolution, const SensorModel& model)
+    : model_(model), geometry_(resolution > 0 ? resolution : 1.0) {
   if (!(resolution > 0)) throw std::invalid_argument("resolution must be > 0");
+  geometry_.clearKeyRays();  // OctoMap's 600 kB ray buffer: insertion walks rays itself
   applyModel();
 }
 
@@ -106,12 +108,12 @@ void VoxelMap::applyModel() {
   if (model_.prob_hit <= 0.5) throw std::invalid_argument("prob_hit must be > 0.5");
   if (model_.prob_miss >= 0.5) throw std::invalid_argument("prob_miss must be < 0.5");
   if (model_.clamp_min >= model_.clamp_max) throw std::invalid_argument("clamp_min must be < clamp_max");
-  tree_.setProbHit(model_.prob_hit);
-  tree_.setProbMiss(model_.prob_miss);
-  tree_.setClampingThresMin(model_.clamp_min);
-  tree_.setClampingThresMax(model_.clamp_max);
-  tree_.setOccupancyThres(model_.occupied_threshold);
-  occupied_log_ = tree_.getOccupancyThresLog();
+  geometry_.setProbHit(model_.prob_hit);
+  geometry_.setProbMiss(model_.prob_miss);
+  geometry_.setClampingThresMin(model_.clamp_min);
+  geometry_.setClampingThresMax(model_.clamp_max);
+  geometry_.setOccupancyThres(model_.occupied_threshold);
+  occupied_log_ = geometry_.getOccupancyThresLog();
 }
 
 InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen::Ref<const Colors>& colors,
@@ -125,7 +127,7 @@ InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen
   const point3d origin(static_cast<float>(origin_d.x()), static_cast<float>(origin_d.y()),
                        static_cast<float>(origin_d.z()));
   OcTreeKey origin_key;
-  if (!tree_.coordToKeyChecked(origin, origin_key)) throw std::invalid_argument("origin is outside the map");
+  if (!geometry_.coordToKeyChecked(origin, origin_key)) throw std::invalid_argument("origin is outside the map");
 
   // 1. Collapse endpoints per voxel (one accumulator per distinct key), on every core.
   const unsigned workers = workerCount(n);
@@ -142,7 +144,7 @@ InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen
       const float* p = points + 3 * i;
       OcTreeKey key;
       if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
-          !tree_.coordToKeyChecked(point3d(p[0], p[1], p[2]), key)) {
+          !geometry_.coordToKeyChecked(point3d(p[0], p[1], p[2]), key)) {
         ++dropped[w];
         continue;
       }
@@ -197,13 +199,13 @@ InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen
     };
     for (size_t i = begin; i < end; ++i) {
       Endpoint& e = merged[i];
-      const point3d centre = tree_.keyToCoord(e.key);
+      const point3d centre = geometry_.keyToCoord(e.key);
       if (max_range < 0.0 || (centre - origin).norm() <= max_range) {
-        walkRay(tree_, origin, centre, sink);
+        walkRay(geometry_, origin, centre, sink);
         e.hit = true;
       } else {
         const point3d dir = (centre - origin).normalized();
-        walkRay(tree_, origin, origin + dir * static_cast<float>(max_range), sink);
+        walkRay(geometry_, origin, origin + dir * static_cast<float>(max_range), sink);
       }
     }
   });
@@ -229,7 +231,12 @@ InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen
   for (uint64_t c : codes) result.voxels_occupied += c & 1;
   result.voxels_updated = unique;
 
+  size_t scratch = 2 * codes.capacity() * sizeof(uint64_t) + (1 << 16) * sizeof(uint32_t);  // + radix sort's
+  for (unsigned w = 0; w < workers; ++w) scratch += endpoints[w].capacity() * sizeof(Endpoint) + indices[w].memoryBytes();
+  for (unsigned w = 0; w < ray_workers; ++w) scratch += grids[w].memoryBytes();
+
   std::unique_lock lock(mutex_);
+  insert_scratch_bytes_ = std::max(insert_scratch_bytes_, scratch);
   applyUpdates(codes, merged, merged_index, rgb != nullptr, static_cast<float>(stamp));
   return result;
 }
@@ -239,15 +246,10 @@ InsertResult VoxelMap::insert(const Eigen::Ref<const Points>& cloud, const Eigen
 void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vector<Endpoint>& endpoints,
                             const FlatKeyIndex& endpoint_index, bool have_color, float stamp) {
   if (codes.empty()) return;
-  constexpr unsigned kDepth = 16;
-  bool root_created = false;
-  if (!tree_.root) {
-    tree_.root = new VoxelNode();
-    ++tree_.tree_size;
-    root_created = true;
-  }
-  VoxelNode* path[kDepth + 1];
-  path[0] = tree_.root;
+  constexpr unsigned kDepth = CompactOctree::kDepth;
+  const bool root_created = tree_.empty();
+  Node* path[kDepth + 1];
+  path[0] = root_created ? tree_.createRoot() : tree_.root();
   unsigned last = 0;  // depth of the deepest valid node on the path
   uint64_t prev = 0;
   bool first = true;
@@ -265,28 +267,30 @@ void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vecto
     }
     prev = code;
     first = false;
-    VoxelNode* node = path[start];
+    Node* node = path[start];
     unsigned depth = start;
     bool skipped = false;
     for (; depth < kDepth; ++depth) {
       const unsigned pos = childAt(code, depth);
-      if (!tree_.nodeChildExists(node, pos)) {
-        if (!tree_.nodeHasChildren(node) && !created) {
+      Node* next = tree_.child(*node, pos);
+      if (!next) {
+        if (!CompactOctree::hasChildren(*node) && !created) {
           // A pruned leaf: OctoMap skips updates that cannot change it, else expands it.
-          if (cannotChange(node->getLogOdds(), hit)) {
+          if (cannotChange(node->log_odds, hit)) {
             skipped = true;
             break;
           }
-          tree_.expandNode(node);
+          tree_.expand(*node);
+          next = tree_.child(*node, pos);
           created = false;
         } else {
-          tree_.createNodeChild(node, pos);
+          next = tree_.createChild(*node, pos);
           created = true;
         }
       } else {
         created = false;
       }
-      node = tree_.getNodeChild(node, pos);
+      node = next;
       path[depth + 1] = node;
     }
     last = depth;
@@ -299,55 +303,65 @@ void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vecto
   for (unsigned d = last; d-- > 0;) finalizeInner(path[d]);
 }
 
-void VoxelMap::updateLeaf(VoxelNode* node, bool created, const OcTreeKey& key, bool hit, const Endpoint* ep,
+void VoxelMap::updateLeaf(Node* node, bool created, const OcTreeKey& key, bool hit, const Endpoint* ep,
                           bool have_color, float stamp) {
-  const float v = node->getLogOdds();
+  const float v = node->log_odds;
   if (!created && cannotChange(v, hit)) return;  // OctoMap's early abort
   const bool was_occupied = !created && v > occupied_log_;
-  tree_.updateNodeLogOdds(node, hit ? tree_.getProbHitLog() : tree_.getProbMissLog());
-  const bool occupied = node->getLogOdds() > occupied_log_;
+  // OctoMap's updateNodeLogOdds: add, then clamp.
+  float& l = node->log_odds;
+  l += hit ? geometry_.getProbHitLog() : geometry_.getProbMissLog();
+  if (l < geometry_.getClampingThresMinLog())
+    l = geometry_.getClampingThresMinLog();
+  else if (l > geometry_.getClampingThresMaxLog())
+    l = geometry_.getClampingThresMaxLog();
+  const bool occupied = occupiedForColumns(*node);
   if (hit) {
-    node->last_seen = stamp;
-    node->min_distance = std::min(node->min_distance, ep->min_distance);
+    Attributes& a = tree_.attributes(*node);
+    a.last_seen = stamp;
+    a.min_distance = std::min(a.min_distance, ep->min_distance);
     if (have_color)
-      node->color = Rgb{static_cast<uint8_t>((ep->rgb_sum[0] + ep->count / 2) / ep->count),
-                        static_cast<uint8_t>((ep->rgb_sum[1] + ep->count / 2) / ep->count),
-                        static_cast<uint8_t>((ep->rgb_sum[2] + ep->count / 2) / ep->count)};
+      a.color = Rgb{static_cast<uint8_t>((ep->rgb_sum[0] + ep->count / 2) / ep->count),
+                    static_cast<uint8_t>((ep->rgb_sum[1] + ep->count / 2) / ep->count),
+                    static_cast<uint8_t>((ep->rgb_sum[2] + ep->count / 2) / ep->count)};
   }
   if (!occupied && !was_occupied) return;
   Column& column = columns_.at(key[0], key[1]);
   if (occupied && !was_occupied) {
-    if (ColumnIndex::addOccupied(column, key[2])) column.setTopAttributes(*node);
+    if (ColumnIndex::addOccupied(column, key[2])) column.setTopAttributes(tree_.attributesOf(*node));
   } else if (occupied) {
-    if (hit && column.top == key[2]) column.setTopAttributes(*node);
-  } else if (ColumnIndex::removeOccupied(column, key[2]) && column.top >= 0) {
-    const VoxelNode* top = tree_.search(OcTreeKey(key[0], key[1], static_cast<uint16_t>(column.top)));
-    if (top) column.setTopAttributes(*top);
+    if (hit && column.top == key[2]) column.setTopAttributes(tree_.attributesOf(*node));
+  } else {
+    auto leafAt = [&](uint16_t z) { return tree_.search(OcTreeKey(key[0], key[1], z)); };
+    auto occupiedAt = [&](uint16_t z) {
+      const Node* n = leafAt(z);
+      return n && occupiedForColumns(*n);
+    };
+    if (ColumnIndex::removeOccupied(column, key[2], occupiedAt) && column.occupied > 0)
+      column.setTopAttributes(tree_.attributesOf(*leafAt(column.top)));
   }
 }
 
 bool VoxelMap::cannotChange(float log_odds, bool hit) const {
-  return hit ? log_odds >= tree_.getClampingThresMaxLog() : log_odds <= tree_.getClampingThresMinLog();
+  return hit ? log_odds >= geometry_.getClampingThresMaxLog() : log_odds <= geometry_.getClampingThresMinLog();
 }
 
-void VoxelMap::finalizeInner(VoxelNode* node) {
-  if (!tree_.pruneNode(node)) node->updateOccupancyChildren();
+void VoxelMap::finalizeInner(Node* node) {
+  if (!tree_.prune(*node)) tree_.updateFromChildren(*node);
 }
 
 void VoxelMap::rebuildColumnIndex() {
   columns_.clear();
-  const unsigned max_depth = tree_.getTreeDepth();
-  for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it) {
-    if (it->getLogOdds() <= occupied_log_) continue;
-    const OcTreeKey base = it.getIndexKey();
-    const unsigned span = 1u << (max_depth - it.getDepth());
+  tree_.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
+    if (!occupiedForColumns(leaf)) return;
+    const unsigned span = 1u << (CompactOctree::kDepth - depth);
     for (unsigned dx = 0; dx < span; ++dx)
       for (unsigned dy = 0; dy < span; ++dy) {
         Column& c = columns_.at(base[0] + dx, base[1] + dy);
         for (unsigned dz = 0; dz < span; ++dz)
-          if (ColumnIndex::addOccupied(c, base[2] + dz)) c.setTopAttributes(*it);
+          if (ColumnIndex::addOccupied(c, base[2] + dz)) c.setTopAttributes(tree_.attributesOf(leaf));
       }
-  }
+  });
 }
 
 ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, int height) const {
@@ -363,7 +377,7 @@ ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, i
   w.color.assign(cells * 3, 0);
   w.last_seen.assign(cells, std::numeric_limits<double>::quiet_NaN());
   w.min_distance.assign(cells, std::numeric_limits<float>::infinity());
-  const double res = tree_.getResolution();
+  const double res = geometry_.getResolution();
   std::shared_lock lock(mutex_);
   for (int row = 0; row < height; ++row) {
     const int64_t ky = key_y0 + row;
@@ -372,10 +386,10 @@ ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, i
       const int64_t kx = key_x0 + col;
       if (kx < 0 || kx > 0xffff) continue;
       const Column* c = columns_.find(static_cast<uint16_t>(kx), static_cast<uint16_t>(ky));
-      if (!c || c->top < 0) continue;
+      if (!c || c->occupied == 0) continue;
       const size_t i = size_t(row) * width + col;
       w.observed[i] = 1;
-      w.elevation[i] = static_cast<float>(tree_.keyToCoord(static_cast<uint16_t>(c->top)) + 0.5 * res);
+      w.elevation[i] = static_cast<float>(geometry_.keyToCoord(static_cast<uint16_t>(c->top)) + 0.5 * res);
       w.color[3 * i] = c->color.r;
       w.color[3 * i + 1] = c->color.g;
       w.color[3 * i + 2] = c->color.b;
@@ -391,76 +405,149 @@ Eigen::VectorXf VoxelMap::occupancy(const Eigen::Ref<const Queries>& points) con
   std::shared_lock lock(mutex_);
   for (Eigen::Index i = 0; i < points.rows(); ++i) {
     OcTreeKey key;
-    if (!points.row(i).allFinite() || !tree_.coordToKeyChecked(points(i, 0), points(i, 1), points(i, 2), key))
+    if (!points.row(i).allFinite() || !geometry_.coordToKeyChecked(points(i, 0), points(i, 1), points(i, 2), key))
       continue;
-    if (const VoxelNode* node = tree_.search(key)) out[i] = static_cast<float>(node->getOccupancy());
+    if (const Node* node = tree_.search(key)) out[i] = static_cast<float>(octomap::probability(node->log_odds));
   }
   return out;
 }
 
+// OctoMap's castRay (ignoring unknown cells), on the compact tree.
 std::optional<Eigen::Vector3d> VoxelMap::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
                                                  double max_range) const {
   std::shared_lock lock(mutex_);
-  point3d end;
-  if (!tree_.getRoot() || !tree_.castRay(point3d(o.x(), o.y(), o.z()), point3d(d.x(), d.y(), d.z()), end, true, max_range))
-    return std::nullopt;
-  return Eigen::Vector3d(end.x(), end.y(), end.z());
+  const point3d origin(o.x(), o.y(), o.z());
+  OcTreeKey key;
+  if (tree_.empty() || !geometry_.coordToKeyChecked(origin, key)) return std::nullopt;
+  auto occupied = [&](const OcTreeKey& k) {
+    const Node* n = tree_.search(k);
+    return n && n->log_odds >= geometry_.getOccupancyThresLog();  // OctoMap's isNodeOccupied
+  };
+  auto hit = [&](const OcTreeKey& k) {
+    const point3d c = geometry_.keyToCoord(k);
+    return Eigen::Vector3d(c.x(), c.y(), c.z());
+  };
+  if (occupied(key)) return hit(key);
+  const point3d direction = point3d(d.x(), d.y(), d.z()).normalized();
+  const double res = geometry_.getResolution();
+  int step[3];
+  double t_max[3], t_delta[3];
+  for (unsigned i = 0; i < 3; ++i) {
+    step[i] = direction(i) > 0.0 ? 1 : (direction(i) < 0.0 ? -1 : 0);
+    if (step[i] != 0) {
+      const double border = geometry_.keyToCoord(key[i]) + double(step[i] * res * 0.5);
+      t_max[i] = (border - origin(i)) / direction(i);
+      t_delta[i] = res / std::fabs(direction(i));
+    } else {
+      t_max[i] = t_delta[i] = std::numeric_limits<double>::max();
+    }
+  }
+  if (step[0] == 0 && step[1] == 0 && step[2] == 0) return std::nullopt;
+  const double max_range_sq = max_range * max_range;
+  const unsigned max_key = 2 * 32768 - 1;
+  while (true) {
+    const unsigned dim = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+    if ((step[dim] < 0 && key[dim] == 0) || (step[dim] > 0 && key[dim] == max_key)) return std::nullopt;
+    key[dim] += step[dim];
+    t_max[dim] += t_delta[dim];
+    if (max_range > 0.0) {
+      const point3d end = geometry_.keyToCoord(key);
+      double dist_sq = 0.0;
+      for (unsigned j = 0; j < 3; ++j) dist_sq += (end(j) - origin(j)) * (end(j) - origin(j));
+      if (dist_sq > max_range_sq) return std::nullopt;
+    }
+    if (occupied(key)) return hit(key);
+  }
 }
 
 VoxelSet VoxelMap::voxels(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double min_occupancy) const {
   VoxelSet out;
   std::shared_lock lock(mutex_);
   OcTreeKey key_lo, key_hi;
-  if (!tree_.getRoot()) return out;
+  if (tree_.empty()) return out;
   const point3d plo(lo.x(), lo.y(), lo.z()), phi(hi.x(), hi.y(), hi.z());
-  if (!tree_.coordToKeyChecked(plo, key_lo) || !tree_.coordToKeyChecked(phi, key_hi))
+  if (!geometry_.coordToKeyChecked(plo, key_lo) || !geometry_.coordToKeyChecked(phi, key_hi))
     throw std::invalid_argument("box is outside the map's key range");
   const float min_log = static_cast<float>(octomap::logodds(min_occupancy));
-  for (auto it = tree_.begin_leafs_bbx(key_lo, key_hi), end = tree_.end_leafs_bbx(); it != end; ++it) {
-    if (it->getLogOdds() < min_log) continue;
-    const OcTreeKey base = it.getIndexKey();
-    const unsigned span = 1u << (tree_.getTreeDepth() - it.getDepth());
+  auto overlaps = [&](const OcTreeKey& base, unsigned depth) {  // the node's key cube meets the box's
+    const unsigned span = 1u << (CompactOctree::kDepth - depth);
+    for (int a = 0; a < 3; ++a)
+      if (base[a] + span - 1 < key_lo[a] || base[a] > key_hi[a]) return false;
+    return true;
+  };
+  tree_.forEachLeaf(overlaps, [&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
+    if (leaf.log_odds < min_log) return;
+    const Attributes& attr = tree_.attributesOf(leaf);
+    const float occupancy = static_cast<float>(octomap::probability(leaf.log_odds));
+    const unsigned span = 1u << (CompactOctree::kDepth - depth);
     for (unsigned dx = 0; dx < span; ++dx)
       for (unsigned dy = 0; dy < span; ++dy)
         for (unsigned dz = 0; dz < span; ++dz) {
           const OcTreeKey k(base[0] + dx, base[1] + dy, base[2] + dz);
-          const double c[3] = {tree_.keyToCoord(k[0]), tree_.keyToCoord(k[1]), tree_.keyToCoord(k[2])};
+          const double c[3] = {geometry_.keyToCoord(k[0]), geometry_.keyToCoord(k[1]), geometry_.keyToCoord(k[2])};
           bool inside = true;  // voxels whose centre lies in the box
           for (int a = 0; a < 3; ++a) inside = inside && c[a] >= lo[a] && c[a] <= hi[a];
           if (!inside) continue;
           for (int a = 0; a < 3; ++a) out.centers.push_back(static_cast<float>(c[a]));
-          out.occupancy.push_back(static_cast<float>(it->getOccupancy()));
-          out.color.insert(out.color.end(), {it->color.r, it->color.g, it->color.b});
-          out.last_seen.push_back(it->last_seen);
-          out.min_distance.push_back(it->min_distance);
+          out.occupancy.push_back(occupancy);
+          out.color.insert(out.color.end(), {attr.color.r, attr.color.g, attr.color.b});
+          out.last_seen.push_back(attr.last_seen);
+          out.min_distance.push_back(attr.min_distance);
         }
-  }
+  });
   return out;
 }
 
 MapStats VoxelMap::stats() const {
   std::shared_lock lock(mutex_);
   MapStats s{};
-  s.resolution = tree_.getResolution();
-  s.nodes = tree_.size();
-  s.leaves = tree_.getNumLeafNodes();
-  s.tree_bytes = tree_.memoryUsage();
+  s.resolution = geometry_.getResolution();
+  s.nodes = tree_.nodeCount();
+  s.leaves = tree_.leafCount();
+  s.node_bytes = sizeof(Node);
+  s.attribute_records = tree_.attributeRecords();
+  s.tree_bytes = tree_.memoryBytes() + sizeof(geometry_);
   s.column_index_bytes = columns_.memoryBytes();
-  s.node_bytes = sizeof(VoxelNode);
-  for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it)
-    s.occupied_leaves += it->getLogOdds() > occupied_log_;
-  if (tree_.getRoot()) {
-    tree_.getMetricMin(s.min[0], s.min[1], s.min[2]);
-    tree_.getMetricMax(s.max[0], s.max[1], s.max[2]);
+  s.insert_scratch_bytes = insert_scratch_bytes_;
+  s.total_bytes = s.tree_bytes + s.column_index_bytes;
+  double lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::numeric_limits<double>::max();
+    hi[a] = -std::numeric_limits<double>::max();
   }
+  tree_.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
+    s.occupied_leaves += occupiedForColumns(leaf);
+    const double size = geometry_.getNodeSize(depth);  // OctoMap's calcMinMax
+    for (int a = 0; a < 3; ++a) {
+      const double low = geometry_.keyToCoord(base[a], depth) - size / 2.0;
+      lo[a] = std::min(lo[a], low);
+      hi[a] = std::max(hi[a], low + size);
+    }
+  });
+  if (!tree_.empty())
+    for (int a = 0; a < 3; ++a) {
+      s.min[a] = lo[a];
+      s.max[a] = hi[a];
+    }
   return s;
 }
 
 namespace {
 
-// Visits every finest-level voxel of every leaf of `tree`: f(key, occupied).
-template <class Tree, class F>
-void forEachVoxel(const Tree& tree, F&& f) {
+// Finest-level voxels of the compact tree: f(key, occupied as OctoMap's isNodeOccupied).
+template <class F>
+void forEachVoxel(const CompactOctree& tree, const octomap::OcTree& geometry, F&& f) {
+  tree.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
+    const unsigned span = 1u << (CompactOctree::kDepth - depth);
+    const bool occ = leaf.log_odds >= geometry.getOccupancyThresLog();
+    for (unsigned dx = 0; dx < span; ++dx)
+      for (unsigned dy = 0; dy < span; ++dy)
+        for (unsigned dz = 0; dz < span; ++dz) f(OcTreeKey(base[0] + dx, base[1] + dy, base[2] + dz), occ);
+  });
+}
+
+template <class F>
+void forEachVoxel(const octomap::OcTree& tree, F&& f) {
   const unsigned max_depth = tree.getTreeDepth();
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
     const OcTreeKey base = it.getIndexKey();
@@ -472,22 +559,22 @@ void forEachVoxel(const Tree& tree, F&& f) {
   }
 }
 
-template <class A, class B>
-Agreement agreementImpl(const A& a, const B& b) {
-  if (std::fabs(a.getResolution() - b.getResolution()) > 1e-9)
-    throw std::invalid_argument("trees have different resolutions");
+// `b_state(key)`: -1 unknown to b, else b's occupancy; `for_each_b(f)`: b's voxels.
+template <class BState, class ForEachB>
+Agreement agreementImpl(const CompactOctree& a, const octomap::OcTree& geometry, BState&& b_state,
+                        ForEachB&& for_each_b) {
   Agreement r;
-  forEachVoxel(a, [&](const OcTreeKey& k, bool occ) {
+  forEachVoxel(a, geometry, [&](const OcTreeKey& k, bool occ) {
     r.occupied_a += occ;
-    const auto* nb = b.search(k);
-    if (!nb) {
+    const int state = b_state(k);
+    if (state < 0) {
       ++r.only_a;
       return;
     }
-    r.agree += occ == b.isNodeOccupied(nb);
+    r.agree += occ == (state == 1);
   });
   size_t known_b = 0;
-  forEachVoxel(b, [&](const OcTreeKey& k, bool occ) {
+  for_each_b([&](const OcTreeKey& k, bool occ) {
     ++known_b;
     r.occupied_b += occ;
     if (!a.search(k)) ++r.only_b;
@@ -496,9 +583,34 @@ Agreement agreementImpl(const A& a, const B& b) {
   return r;
 }
 
+void checkResolutions(double a, double b) {
+  if (std::fabs(a - b) > 1e-9) throw std::invalid_argument("trees have different resolutions");
+}
+
 }  // namespace
 
-Agreement agreement(const VoxelTree& a, const octomap::OcTree& b) { return agreementImpl(a, b); }
-Agreement agreement(const VoxelTree& a, const VoxelTree& b) { return agreementImpl(a, b); }
+Agreement agreement(const VoxelMap& a, const octomap::OcTree& b) {
+  checkResolutions(a.resolution(), b.getResolution());
+  return a.withTree([&](const CompactOctree& ta, const octomap::OcTree& ga) {
+    return agreementImpl(
+        ta, ga, [&](const OcTreeKey& k) { const auto* n = b.search(k); return n ? int(b.isNodeOccupied(n)) : -1; },
+        [&](auto&& f) { forEachVoxel(b, f); });
+  });
+}
+
+Agreement agreement(const VoxelMap& a, const VoxelMap& b) {
+  checkResolutions(a.resolution(), b.resolution());
+  return a.withTree([&](const CompactOctree& ta, const octomap::OcTree& ga) {
+    return b.withTree([&](const CompactOctree& tb, const octomap::OcTree& gb) {
+      return agreementImpl(
+          ta, ga,
+          [&](const OcTreeKey& k) {
+            const Node* n = tb.search(k);
+            return n ? int(n->log_odds >= gb.getOccupancyThresLog()) : -1;
+          },
+          [&](auto&& f) { forEachVoxel(tb, gb, f); });
+    });
+  });
+}
 
 }  // namespace layerpilot

@@ -1,4 +1,4 @@
-// VoxelMap: the attribute octree, its column index and a reader/writer lock.
+// VoxelMap: the attribute octree (CompactOctree), its column index and a reader/writer lock.
 // Insertion computes rays without the lock (on several threads) and takes it only to apply
 // the de-duplicated updates in key order; readers share the lock.
 #pragma once
@@ -16,7 +16,7 @@
 
 #include "column_index.hpp"
 #include "rw_lock.hpp"
-#include "voxel_tree.hpp"
+#include "compact_octree.hpp"
 
 namespace layerpilot {
 
@@ -71,8 +71,10 @@ enum class FileFormat { Ot, Bt };
 
 struct MapStats {
   double resolution;
-  size_t nodes, leaves, tree_bytes, column_index_bytes, node_bytes;
-  size_t occupied_leaves;
+  size_t nodes, leaves, node_bytes, occupied_leaves, attribute_records;
+  // Whole map in memory: tree (groups, attribute records, free lists) + column index. Beside it,
+  // the largest working memory one insert() has needed so far (bit grids, keys, endpoints).
+  size_t tree_bytes, column_index_bytes, total_bytes, insert_scratch_bytes;
   double min[3], max[3];  // metric bounds of known space (0 if empty)
 };
 
@@ -98,13 +100,13 @@ class VoxelMap {
   static std::unique_ptr<VoxelMap> parse(const char* data, size_t size, const SensorModel& model);
 
   MapStats stats() const;
-  double resolution() const { return tree_.getResolution(); }
+  double resolution() const { return geometry_.getResolution(); }
   const SensorModel& model() const { return model_; }
   // Reader access for comparisons against reference trees (caller holds no other lock).
   template <class F>
   auto withTree(F&& f) const {
     std::shared_lock lock(mutex_);
-    return f(tree_);
+    return f(tree_, geometry_);
   }
 
  private:
@@ -120,14 +122,18 @@ class VoxelMap {
   void applyModel();
   void applyUpdates(const std::vector<uint64_t>& codes, const std::vector<Endpoint>& endpoints,
                     const FlatKeyIndex& endpoint_index, bool have_color, float stamp);
-  void updateLeaf(VoxelNode* node, bool created, const octomap::OcTreeKey& key, bool hit,
+  void updateLeaf(Node* node, bool created, const octomap::OcTreeKey& key, bool hit,
                   const Endpoint* ep, bool have_color, float stamp);
   bool cannotChange(float log_odds, bool hit) const;
-  void finalizeInner(VoxelNode* node);
+  void finalizeInner(Node* node);
   void rebuildColumnIndex();
+  bool occupiedForColumns(const Node& n) const { return n.log_odds > occupied_log_; }
 
   SensorModel model_;
-  VoxelTree tree_;
+  // Key arithmetic and the sensor model's log-odds, exactly OctoMap's; holds no nodes.
+  octomap::OcTree geometry_;
+  CompactOctree tree_;
+  size_t insert_scratch_bytes_ = 0;
   ColumnIndex columns_;
   float occupied_log_;
   mutable WriterPreferringLock mutex_;
@@ -137,7 +143,7 @@ class VoxelMap {
 struct Agreement {
   size_t agree = 0, either = 0, only_a = 0, only_b = 0, occupied_a = 0, occupied_b = 0;
 };
-Agreement agreement(const VoxelTree& a, const octomap::OcTree& b);
-Agreement agreement(const VoxelTree& a, const VoxelTree& b);
+Agreement agreement(const VoxelMap& a, const octomap::OcTree& b);
+Agreement agreement(const VoxelMap& a, const VoxelMap& b);
 
 }  // namespace layerpilot

@@ -6,6 +6,7 @@
 // without allocating (header fields, every node, the exact end) and only then lets OctoMap build
 // the tree from bytes known to be well formed.
 #include "voxel_map.hpp"
+#include "voxel_tree.hpp"
 
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
@@ -227,23 +228,55 @@ class MemoryBuf : public std::streambuf {
   size_t consumed() const { return static_cast<size_t>(gptr() - eback()); }
 };
 
+// A tree OctoMap has read, node by node into the compact tree (attributes as far as the type has them).
 template <class SrcTree, class SrcNode>
-void copyStructure(const SrcTree& src, const SrcNode* s, VoxelTree& dst, VoxelNode* d) {
-  d->setLogOdds(s->getLogOdds());
+void copyStructure(const SrcTree& src, const SrcNode* s, CompactOctree& dst, Node* d) {
+  d->log_odds = s->getLogOdds();
+  const bool leaf = !src.nodeHasChildren(s);
   if constexpr (std::is_same_v<SrcNode, octomap::ColorOcTreeNode>) {
     const auto c = s->getColor();
-    d->color = Rgb{c.r, c.g, c.b};
+    if (leaf && !(c.r == 0 && c.g == 0 && c.b == 0)) dst.attributes(*d).color = Rgb{c.r, c.g, c.b};
+  } else if constexpr (std::is_same_v<SrcNode, VoxelNode>) {
+    const Attributes a{s->color, s->last_seen, s->min_distance};
+    if (leaf && !(a == Attributes{})) dst.attributes(*d) = a;
   }
   for (unsigned i = 0; i < 8; ++i)
-    if (src.nodeChildExists(s, i)) copyStructure(src, src.getNodeChild(s, i), dst, dst.createNodeChild(d, i));
+    if (src.nodeChildExists(s, i)) {
+      Node* child = dst.createChild(*d, i);
+      copyStructure(src, src.getNodeChild(s, i), dst, child);
+    }
 }
 
 template <class SrcTree>
-void copyTree(const SrcTree& src, VoxelTree& dst) {
-  if (!src.getRoot()) return;
-  dst.root = new VoxelNode();
-  ++dst.tree_size;
-  copyStructure(src, src.getRoot(), dst, dst.root);
+void copyTree(const SrcTree& src, CompactOctree& dst) {
+  if (src.getRoot()) copyStructure(src, src.getRoot(), dst, dst.createRoot());
+}
+
+// OcTreeBaseImpl::writeNodesRecurs of LayerpilotVoxelTree: data, then one bit per existing child.
+// Inner nodes carry a never-hit voxel's attributes (only leaves have any).
+void writeOtNode(std::ostream& out, const CompactOctree& tree, const Node& n) {
+  const Attributes& a = tree.attributesOf(n);
+  out.write(reinterpret_cast<const char*>(&n.log_odds), sizeof(float));
+  out.write(reinterpret_cast<const char*>(&a.color), sizeof(Rgb));
+  out.write(reinterpret_cast<const char*>(&a.last_seen), sizeof(float));
+  out.write(reinterpret_cast<const char*>(&a.min_distance), sizeof(float));
+  uint8_t mask = 0;
+  for (unsigned i = 0; i < 8; ++i) mask |= uint8_t(tree.child(n, i) != nullptr) << i;
+  out.put(static_cast<char>(mask));
+  for (unsigned i = 0; i < 8; ++i)
+    if (const Node* c = tree.child(n, i)) writeOtNode(out, tree, *c);
+}
+
+// OccupancyOcTreeBase::writeBinaryNode: two bits per child (01 free, 10 occupied, 11 inner).
+void writeBtNode(std::ostream& out, const CompactOctree& tree, const Node& n, float occupied_log) {
+  unsigned bits = 0;
+  for (unsigned i = 0; i < 8; ++i)
+    if (const Node* c = tree.child(n, i))
+      bits |= (CompactOctree::hasChildren(*c) ? 3u : c->log_odds >= occupied_log ? 2u : 1u) << (2 * i);
+  out.put(static_cast<char>(bits & 0xff));
+  out.put(static_cast<char>(bits >> 8));
+  for (unsigned i = 0; i < 8; ++i)
+    if (const Node* c = tree.child(n, i); c && CompactOctree::hasChildren(*c)) writeBtNode(out, tree, *c, occupied_log);
 }
 
 }  // namespace
@@ -251,13 +284,19 @@ void copyTree(const SrcTree& src, VoxelTree& dst) {
 std::string VoxelMap::serialize(FileFormat format) const {
   std::ostringstream out(std::ios::binary);
   std::shared_lock lock(mutex_);
-  if (format == FileFormat::Ot) {
-    tree_.write(out);
-  } else {
-    // OctoMap's binary header with the stock tree id, so every .bt reader takes the file as is.
-    out << kBtMagic << "\n#\n"
-        << "id OcTree\nsize " << tree_.size() << "\nres " << tree_.getResolution() << "\ndata\n";
-    tree_.writeBinaryData(out);
+  // OctoMap's headers (AbstractOcTree::write; the .bt one with the stock tree id, so every .bt
+  // reader takes the file as is).
+  if (format == FileFormat::Ot)
+    out << kOtMagic << "\n# (feel free to add / change comments, but leave the first line as it is!)\n#\n"
+        << "id LayerpilotVoxelTree\n";
+  else
+    out << kBtMagic << "\n#\nid OcTree\n";
+  out << "size " << tree_.nodeCount() << "\nres " << geometry_.getResolution() << "\ndata\n";
+  if (const Node* root = tree_.root()) {
+    if (format == FileFormat::Ot)
+      writeOtNode(out, tree_, *root);
+    else
+      writeBtNode(out, tree_, *root, geometry_.getOccupancyThresLog());
   }
   if (!out) throw std::runtime_error("cannot serialize the map");
   return out.str();
@@ -276,7 +315,9 @@ std::unique_ptr<VoxelMap> VoxelMap::parse(const char* data, size_t n, const Sens
       stock.readBinaryData(in);
       copyTree(stock, map->tree_);
     } else if (h.id == "LayerpilotVoxelTree") {
-      map->tree_.readData(in);
+      VoxelTree stock(h.res);
+      stock.readData(in);
+      copyTree(stock, map->tree_);
     } else if (h.id == "ColorOcTree") {
       octomap::ColorOcTree stock(h.res);
       stock.readData(in);

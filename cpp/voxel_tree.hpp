@@ -1,6 +1,6 @@
-// The attribute octree: OctoMap's occupancy node plus what a survey drone needs per voxel.
-// Follows OctoMap's custom-node pattern (as ColorOcTree does) and registers the tree type,
-// so `.ot` files round-trip with every attribute.
+// The `.ot` file type of the map: OctoMap's occupancy node plus the voxel attributes, following
+// OctoMap's custom-node pattern (as ColorOcTree does) and registered as `LayerpilotVoxelTree`.
+// The map itself lives in a CompactOctree; this OctoMap tree only reads files.
 #pragma once
 
 #include <octomap/OccupancyOcTreeBase.h>
@@ -12,14 +12,10 @@
 #include <limits>
 #include <ostream>
 
+#include "compact_octree.hpp"
+
 namespace layerpilot {
 
-struct Rgb {
-  uint8_t r = 0, g = 0, b = 0;
-  bool operator==(const Rgb& o) const { return r == o.r && g == o.g && b == o.b; }
-};
-
-// 24 bytes: children pointer (8) + log-odds (4) + color (3, +1 pad) + last seen (4) + min distance (4).
 class VoxelNode : public octomap::OcTreeNode {
  public:
   friend class VoxelTree;
@@ -74,11 +70,6 @@ class VoxelTree : public octomap::OccupancyOcTreeBase<VoxelNode> {
   explicit VoxelTree(double resolution);
   VoxelTree* create() const override { return new VoxelTree(resolution); }
   std::string getTreeType() const override { return "LayerpilotVoxelTree"; }
-
-  // OctoMap keeps these protected; the batched insertion in voxel_map.cpp maintains them.
-  using OccupancyOcTreeBase<VoxelNode>::root;
-  using OccupancyOcTreeBase<VoxelNode>::tree_size;
-  using OccupancyOcTreeBase<VoxelNode>::size_changed;
 
  private:
   // Registers the type with OctoMap's factory once, so AbstractOcTree::read can create it.

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from layerpilot.bench.map import print_map_bench, run_map_bench
+from layerpilot.bench.map import print_map_bench, run_map_bench, run_memory_bench
 from layerpilot.cli import main
 from layerpilot.eval.fixtures import survey_clouds
 from layerpilot.map import VoxelMap
@@ -41,5 +41,20 @@ def test_bench_map_reports_every_figure(capsys) -> None:
     assert result["points_per_frame"] == int(np.mean([len(f) for f in frames])) > 0.5 * 96 * 72
     for key in ("layerpilot_ms", "octomap_discretized_ms", "octomap_default_ms", "column_layers_512_ms"):
         assert result[key] > 0, key
-    assert result["node_bytes"] == 24 and result["leaves"] > 1000
+    assert result["node_bytes"] == 8 and result["leaves"] > 1000
     assert np.isfinite(result["ratio_vs_default"]) and np.isfinite(result["ratio_vs_discretized"])
+
+
+def test_bench_map_memory_on_a_surveyed_world(capsys) -> None:
+    result = {"memory": run_memory_bench(150.0, seed=2)}  # 2 survey lines of 3 frames
+    print_map_bench(result | run_map_bench(survey_clouds(1, seed=1, width=64, height=48)))
+    out = capsys.readouterr().out
+    assert "OctoMap / layerpilot memory" in out
+    m = json.loads(out.strip().splitlines()[-1])["memory"]
+    assert m == result["memory"]
+    assert m["survey_frames"] == 6 and m["leaves"] > 20000
+    assert abs(m["leaves"] - m["octomap_leaves"]) <= 0.001 * m["octomap_leaves"]  # the same tree
+    assert m["attribute_records"] > 1000
+    # the whole map, every attribute, under OctoMap's occupancy-only tree on the same data
+    assert m["bytes_per_leaf"] < m["octomap_bytes_per_leaf"] and m["ratio_memory"] > 1
+    assert abs(m["total_mib"] - m["tree_mib"] - m["column_index_mib"]) <= 0.01

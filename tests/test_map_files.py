@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from layerpilot import _core
 from layerpilot.eval.fixtures import survey_clouds
 from layerpilot.map import VoxelMap, agreement
 
@@ -89,6 +90,18 @@ def test_real_scan_matches_octomap_voxel_by_voxel(scan, resolution: float) -> No
     assert a["either"] > (100000 if resolution == 0.2 else 1500)
     assert a["fraction"] >= 0.999
     assert a["occupied_a"] == a["occupied_b"]
+
+
+def test_whole_map_takes_less_memory_per_leaf_than_stock_octomap_on_the_real_scan(scan) -> None:
+    points, _ = scan
+    ours, stock = VoxelMap(0.2), _core._ReferenceOcTree(0.2)
+    ours.insert(points, np.zeros(3), max_range=1000.0)
+    stock.insert(points, np.zeros(3), 1000.0, True)
+    s = ours.stats()
+    assert s["leaves"] == pytest.approx(stock.leaves(), rel=0.005) and s["leaves"] > 40000
+    # tree with every attribute + column index, against OctoMap's nodes and child arrays alone
+    assert s["bytes_per_leaf"] < 0.8 * stock.memory_usage() / stock.leaves()
+    assert s["total_bytes"] < stock.memory_usage()
 
 
 def test_geb079_loads_gives_column_layers_and_saves_back_identically(octomap_data: Path, tmp_path: Path) -> None:

@@ -131,6 +131,12 @@ def test_memory_stats(frames) -> None:
     for f in frames:
         m.insert(f.points, f.origin, f.colors, f.stamp)
     s = m.stats()
-    assert s["node_bytes"] == 24
+    assert s["node_bytes"] == 8
     assert s["leaves"] > 10000 and s["nodes"] > s["leaves"]
-    assert s["tree_bytes"] >= s["nodes"] * 24
+    # One 64-byte group of children per inner node, one 12-byte record per voxel ever hit.
+    assert s["tree_bytes"] >= (s["nodes"] - s["leaves"]) * 64 + s["attribute_records"] * 12
+    hit = m.voxels(np.full(3, -500.0), np.full(3, 500.0), min_occupancy=0.0).last_seen
+    assert 1000 < s["attribute_records"] <= np.isfinite(hit).sum()  # a pruned leaf's record covers 8+ voxels
+    assert s["total_bytes"] == s["tree_bytes"] + s["column_index_bytes"] > 0
+    assert s["bytes_per_leaf"] == s["total_bytes"] / s["leaves"]
+    assert s["insert_scratch_bytes"] > 0

@@ -1,4 +1,5 @@
-"""`layerpilot bench map`: layerpilot's insertion side by side with stock OctoMap, same frames, same run."""
+"""`layerpilot bench map`: layerpilot's insertion side by side with stock OctoMap, same frames, same run;
+then both maps' memory after a lawnmower survey of a whole simulated world (a square kilometre)."""
 
 from __future__ import annotations
 
@@ -59,6 +60,66 @@ def run_map_bench(frames: list, resolution: float = 1.0, max_range: float = 100.
     }
 
 
+def run_memory_bench(world_size: float, seed: int = 0, resolution: float = 1.0, max_range: float = 100.0) -> dict:
+    """Survey a whole ``world_size`` world (``area_survey_clouds``) into layerpilot's map and into
+    stock OctoMap (discretized insertion, occupancy only), and compare their memory.
+
+    layerpilot's figure is the whole map (``VoxelMap.stats``: tree, attribute records, column
+    index); the largest working memory of one insert is reported beside it. OctoMap's is its
+    own ``memoryUsage()`` (nodes and child arrays, no allocator overhead, no insertion sets).
+    """
+    from layerpilot.eval.fixtures import area_survey_clouds  # renders with OpenGL
+
+    ours, stock = VoxelMap(resolution), _core._ReferenceOcTree(resolution)
+    bar, points, frames, ms_ours, ms_stock = None, 0, 0, 0.0, 0.0
+    for count, f in area_survey_clouds(world_size, seed, max_depth=max_range):
+        bar = bar or Progress(count, f"bench map memory, {world_size:.0f} m world", " frames")
+        ms_ours += _ms(lambda: ours.insert(f.points, f.origin, f.colors, f.stamp, max_range))
+        ms_stock += stock.insert(f.points[np.isfinite(f.points).all(axis=1)], f.origin, max_range, True)
+        frames, points = frames + 1, points + len(f.points)
+        bar.update(frames, f"{len(f.points)} points")
+    s = ours.stats()
+    mib = 1 / 2**20
+    return {
+        "world_size_m": world_size,
+        "survey_frames": frames,
+        "survey_points": points,
+        "leaves": s["leaves"],
+        "octomap_leaves": stock.leaves(),
+        "attribute_records": s["attribute_records"],
+        "tree_mib": round(s["tree_bytes"] * mib, 2),
+        "column_index_mib": round(s["column_index_bytes"] * mib, 2),
+        "total_mib": round(s["total_bytes"] * mib, 2),
+        "insert_scratch_mib": round(s["insert_scratch_bytes"] * mib, 2),
+        "octomap_mib": round(stock.memory_usage() * mib, 2),
+        "bytes_per_leaf": round(s["bytes_per_leaf"], 2),
+        "octomap_bytes_per_leaf": round(stock.memory_usage() / stock.leaves(), 2),
+        "ratio_memory": round(stock.memory_usage() / s["total_bytes"], 2),
+        "survey_insert_ms_per_frame": round(ms_ours / frames, 2),
+        "octomap_survey_insert_ms_per_frame": round(ms_stock / frames, 2),
+    }
+
+
+def print_memory_bench(m: dict) -> None:
+    rows = [
+        ("survey", f"{m['survey_frames']} frames of 320x240, {m['survey_points']} points, "
+                   f"{m['world_size_m']:.0f} m x {m['world_size_m']:.0f} m world"),
+        ("layerpilot whole map (all attributes)", f"{m['total_mib']:.1f} MiB = {m['bytes_per_leaf']:.2f} B/leaf "
+                                                  f"over {m['leaves']} leaves"),
+        ("  tree (8-byte nodes, 64-byte groups)", f"{m['tree_mib']:.1f} MiB, {m['attribute_records']} attribute records"),
+        ("  column index", f"{m['column_index_mib']:.1f} MiB"),
+        ("  largest insert working memory", f"{m['insert_scratch_mib']:.1f} MiB (freed after each insert)"),
+        ("OctoMap OcTree memoryUsage (occupancy only)", f"{m['octomap_mib']:.1f} MiB = "
+                                                        f"{m['octomap_bytes_per_leaf']:.2f} B/leaf over {m['octomap_leaves']} leaves"),
+        ("OctoMap / layerpilot memory", f"{m['ratio_memory']:.2f}x"),
+        ("insert on the survey, ms/frame", f"{m['survey_insert_ms_per_frame']:.1f} "
+                                           f"(OctoMap discretized {m['octomap_survey_insert_ms_per_frame']:.1f})"),
+    ]
+    width = max(len(name) for name, _ in rows)
+    for name, value in rows:
+        print(f"  {name:<{width}}  {value}")
+
+
 def print_map_bench(result: dict) -> None:
     rows = [
         ("layerpilot insert", f"{result['layerpilot_ms']:.1f} ms/frame"),
@@ -68,19 +129,24 @@ def print_map_bench(result: dict) -> None:
         ("speed-up vs default", f"{result['ratio_vs_default']:.1f}x"),
         ("voxel agreement with discretized", f"{100 * result['voxel_agreement']:.3f} % of {result['voxels_compared']}"),
         ("column layers 512x512", f"{result['column_layers_512_ms']:.2f} ms"),
-        ("node size / tree bytes per leaf", f"{result['node_bytes']} B / {result['bytes_per_leaf']} B"),
+        ("node size / whole map bytes per leaf", f"{result['node_bytes']} B / {result['bytes_per_leaf']} B"),
         ("OctoMap OcTree bytes per leaf (same data)", f"{result['octomap_bytes_per_leaf']} B"),
     ]
     width = max(len(name) for name, _ in rows)
     print(f"{result['frames']} frames of {result['points_per_frame']} points, 1 m voxels, 100 m range")
     for name, value in rows:
         print(f"  {name:<{width}}  {value}")
+    if "memory" in result:
+        print_memory_bench(result["memory"])
     print(json.dumps(result))
 
 
-def main(frames: int, seed: int) -> None:
+def main(frames: int, seed: int, world_size: float) -> None:
     print(f"rendering {frames} simulator frames (640x480, 40-60 m above the forest, pitched 60 deg down)...",
           flush=True)
     from layerpilot.eval.fixtures import survey_clouds  # 640x480 ground-truth depth, far points kept
 
-    print_map_bench(run_map_bench(survey_clouds(frames, seed)))
+    result = run_map_bench(survey_clouds(frames, seed))
+    if world_size > 0:
+        result["memory"] = run_memory_bench(world_size, seed)
+    print_map_bench(result)

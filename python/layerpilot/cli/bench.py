@@ -15,6 +15,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     b = benches.add_parser("map", help="insertion speed vs OctoMap, agreement, column layers, memory")
     b.add_argument("--frames", type=int, default=6)
     b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--world-size", type=float, default=1000.0,
+                   help="metres; memory after surveying a world this wide (0: skip)")
     b.set_defaults(func=_map)
 
     b = benches.add_parser("decide", help="layers + decision tick on 512, 1024 and 2048 square grids")
@@ -49,7 +51,7 @@ def register(commands: argparse._SubParsersAction) -> None:
 def _map(args: argparse.Namespace) -> None:
     from layerpilot.bench.map import main
 
-    main(args.frames, args.seed)
+    main(args.frames, args.seed, args.world_size)
 
 
 def _decide(args: argparse.Namespace) -> None:

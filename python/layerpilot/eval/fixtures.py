@@ -5,6 +5,8 @@ the preview pictures feed to the algorithm packages.
 
 * ``survey_clouds``: ground-truth depth clouds of a straight survey leg over the
   simulator's forest (``sim.World``, rendered by ``sim.Renderer``);
+* ``area_survey_clouds``: the same camera flying a lawnmower over a whole world (the map's
+  memory on a square kilometre);
 * ``BENCH_PAIRS`` / ``render_pair`` / ``sideways_flight``: rendered stereo pairs and
   flights of the forest for the depth bench, preview and tests;
 * ``plane_frame`` / ``noise_texture``: exact views of a textured ground plane through
@@ -52,6 +54,33 @@ def survey_clouds(count: int, seed: int = 0, width: int = 640, height: int = 480
             frame = renderer.render(camera_pose((x, y, z), float(rng.uniform(-0.3, 0.3)), pitch_deg), float(k))
             clouds.append(source.push(frame))  # never None: rendered frames carry depth
     return clouds
+
+
+def area_survey_clouds(world_size: float, seed: int = 0, width: int = 320, height: int = 240,
+                       altitude: float = 50.0, line_spacing: float = 100.0, frame_spacing: float = 50.0,
+                       max_depth: float = 100.0):
+    """Yields ``(frame count, cloud)`` for a lawnmower survey over the whole ``world_size`` world.
+
+    Lines run east and west in turn, ``line_spacing`` apart, a frame every ``frame_spacing``
+    metres at ``altitude`` above the terrain, the camera (90 deg horizontal field of view)
+    pitched 60 deg down along the line; frame k is stamped k seconds. A generator, so a
+    square kilometre (hundreds of frames) never sits in memory at once.
+    """
+    from layerpilot.depth.source import GroundTruthDepth
+    from layerpilot.sim.render import Renderer
+    from layerpilot.sim.world import World, WorldConfig
+
+    world = World(WorldConfig(seed=seed, size=world_size))
+    source = GroundTruthDepth(max_depth=max_depth)
+    half = world_size / 2 - frame_spacing / 2
+    xs = np.arange(-half, half + 1e-9, frame_spacing)
+    lines = np.arange(-half, half + 1e-9, line_spacing)
+    poses = [(x, y, 0.0 if i % 2 == 0 else math.pi) for i, y in enumerate(lines) for x in (xs if i % 2 == 0 else xs[::-1])]
+    with Renderer(world, CameraConfig(width=width, height=height, pitch_deg=60.0)) as renderer:
+        for k, (x, y, yaw) in enumerate(poses):
+            z = float(world.terrain_height(x, y)) + altitude
+            frame = renderer.render(camera_pose((x, y, z), yaw, 60.0), float(k))
+            yield len(poses), source.push(frame)
 
 
 # --- rendered stereo pairs and flights --------------------------------------------------------

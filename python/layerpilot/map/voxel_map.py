@@ -209,9 +209,14 @@ class VoxelMap:
         return self
 
     def stats(self) -> dict:
-        """Sizes (nodes, leaves, bytes, bytes per leaf) and metric bounds of known space."""
+        """Sizes (nodes, leaves, bytes, bytes per leaf) and metric bounds of known space.
+
+        ``total_bytes`` is the whole map in memory: ``tree_bytes`` (nodes, attribute records,
+        free lists) + ``column_index_bytes``; ``bytes_per_leaf`` divides it by the leaves.
+        ``insert_scratch_bytes`` is the most working memory one insert has needed (freed after it).
+        """
         s = self._core.stats()
-        s["bytes_per_leaf"] = s["tree_bytes"] / s["leaves"] if s["leaves"] else 0.0
+        s["bytes_per_leaf"] = s["total_bytes"] / s["leaves"] if s["leaves"] else 0.0
         return s
 
 
