@@ -41,22 +41,20 @@ class PhotoMap:
 def build_photo_map(folder: PhotoFolder, config: PhotoConfig = PhotoConfig(), stream: TextIO | None = None,
                     label: str = "photos") -> PhotoMap:
     """Every pair's cloud into one voxel map (stamp = the photo's index), with a progress bar."""
+    n = len(folder.photos)
+    progress = Progress(2 * n, label, " steps", stream)  # load every photo, then refine and match each pair
+    frames = []
+    for i in range(n):
+        frames.append(folder.frame(i))
+        progress.update(i + 1, f"loaded {i + 1}/{n} photos")
+    pairs = PhotoStereo(config).run(frames, lambda done, total: progress.update(n + n * done / max(total, 1),
+                                                                               f"pairs {done}/{total}"))
     m = VoxelMap(config.resolution)
-    stereo = PhotoStereo(config)
-    pairs: list[PairResult] = []
-    cameras = []
-    progress = Progress(len(folder.photos), label, " photos", stream)
-    for i in range(len(folder.photos)):
-        frame = folder.frame(i)
-        cameras.append(frame.pose.position)
-        if (pair := stereo.push(frame)) is not None:
-            pairs.append(pair)
-            if pair.cloud is not None:
-                c = pair.cloud
-                m.insert(c.points, c.origin, c.colors, c.stamp, config.match.max_depth)
-        progress.update(i + 1, f"pairs {sum(p.accepted for p in pairs)}/{len(pairs)}")
+    for pair in pairs:
+        if (c := pair.cloud) is not None:
+            m.insert(c.points, c.origin, c.colors, c.stamp, config.match.max_depth)
     progress.close(f"pairs {sum(p.accepted for p in pairs)}/{len(pairs)} accepted")
-    result = PhotoMap(folder, m, pairs, np.array(cameras).reshape(-1, 3))
+    result = PhotoMap(folder, m, pairs, np.array([f.pose.position for f in frames]).reshape(-1, 3))
     result.columns = map_columns(result)
     return result
 

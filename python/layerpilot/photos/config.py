@@ -16,6 +16,7 @@ class RefineConfig:
     ratio: float = 0.9  # Lowe's ratio test
     ransac_px: float = 1.0  # essential-matrix RANSAC threshold, pixels at the working scale
     min_inliers: int = 60
+    min_inlier_ratio: float = 0.35  # RANSAC inliers / ratio-test matches; below it the geometry is a guess
     max_rotation_deg: float = 5.0  # images and GNSS/attitude may disagree by this much ...
     max_direction_deg: float = 25.0  # ... and the baseline directions by this much
     flip_heading: bool = True  # a baseline direction off by 180 +- max_direction_deg: the heading is, correct it
@@ -25,6 +26,7 @@ class RefineConfig:
         check_range("ratio", self.ratio, 0.1, 1.0)
         check_range("ransac_px", self.ransac_px, 0.1)
         check_range("min_inliers", self.min_inliers, 8)
+        check_range("min_inlier_ratio", self.min_inlier_ratio, 0.0, 1.0)
         check_range("max_rotation_deg", self.max_rotation_deg, 0.0, 90.0)
         check_range("max_direction_deg", self.max_direction_deg, 0.0, 180.0)
 

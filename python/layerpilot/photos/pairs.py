@@ -1,19 +1,19 @@
-"""Stereo from a sequence of photos: pick pairs, refine their relative pose, match and triangulate.
+"""Stereo from a flight's photos: pick pairs, refine their relative pose, match, triangulate.
 
 The frame picker, rectification, semi-global matching, filters and back-projection are
-``layerpilot.depth``'s; this module puts the image-based pose refinement between picking
-and matching, and says per pair what happened.
+``layerpilot.depth``'s; this module puts the image-based pose refinement (``photos.refine``)
+between picking and matching, and says per pair what happened.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import Callable, Sequence
 
 import numpy as np
 
-from layerpilot.depth.picking import FramePicker
+from layerpilot.depth.picking import FramePicker, PickResult
 from layerpilot.depth.stereo import Disparity, StereoMatcher
 from layerpilot.geometry import CameraFrame, PointCloud
 from layerpilot.photos.config import PhotoConfig
@@ -22,9 +22,9 @@ from layerpilot.photos.refine import PoseRefiner, Refinement
 
 @dataclass(frozen=True)
 class PairResult:
-    """One picked pair: ``ref`` is the newer frame (the points are seen from it)."""
+    """One picked pair: ``ref`` is the newer photo (the points are seen from it)."""
 
-    ref: int  # frame stamps (photo indices)
+    ref: int  # photo indices
     partner: int
     baseline_ratio: float
     refinement: Refinement | None  # None with raw poses
@@ -55,7 +55,7 @@ def overlap_coverage(disp: Disparity, scene_depth: float) -> float:
 
 
 class PhotoStereo:
-    """Feeds frames in flight order; yields a ``PairResult`` for every frame the picker pairs."""
+    """Stereo pairs of a flight, in flight order (frame ``stamp`` = photo index)."""
 
     def __init__(self, config: PhotoConfig = PhotoConfig()) -> None:
         self.config = config
@@ -63,22 +63,33 @@ class PhotoStereo:
         self.refiner = PoseRefiner(config.refinement)
         self.matcher = StereoMatcher(config.match)
 
-    def push(self, frame: CameraFrame) -> PairResult | None:
-        pick = self.picker.push(frame)
-        if pick.partner is None:
-            return None
-        partner, refinement = pick.partner, None
-        if self.config.refine:
-            refinement = self.refiner.refine(frame, pick.partner)
-            if refinement.ref is None or refinement.partner is None:
-                return PairResult(int(frame.stamp), int(partner.stamp), pick.baseline_ratio, refinement, None,
-                                  math.nan)
-            frame, partner = refinement.ref, refinement.partner
-        cloud, disp = self.matcher.cloud(frame, partner)
-        return PairResult(int(frame.stamp), int(partner.stamp), pick.baseline_ratio, refinement, cloud,
-                          overlap_coverage(disp, pick.scene_depth))
+    def picks(self, frames: Sequence[CameraFrame]) -> list[tuple[int, PickResult]]:
+        """(photo index, pick) for every photo the picker found a partner for."""
+        out = []
+        for i, frame in enumerate(frames):
+            if (pick := self.picker.push(frame)).partner is not None:
+                out.append((i, pick))
+        return out
 
-    def run(self, frames: Iterable[CameraFrame]) -> Iterator[PairResult]:
-        for frame in frames:
-            if (result := self.push(frame)) is not None:
-                yield result
+    def pair(self, frames: Sequence[CameraFrame], i: int, pick: PickResult) -> PairResult:
+        """Refine (unless configured off), match and triangulate photo ``i`` with its picked partner."""
+        j = int(pick.partner.stamp)
+        ref, partner, refinement = frames[i], pick.partner, None
+        if self.config.refine:
+            refinement = self.refiner.refine(ref, partner)
+            if refinement.ref is None or refinement.partner is None:
+                return PairResult(i, j, pick.baseline_ratio, refinement, None, math.nan)
+            ref, partner = refinement.ref, refinement.partner
+        cloud, disp = self.matcher.cloud(ref, partner)
+        return PairResult(i, j, pick.baseline_ratio, refinement, cloud, overlap_coverage(disp, pick.scene_depth))
+
+    def run(self, frames: Sequence[CameraFrame], progress: Callable[[int, int], None] | None = None
+            ) -> list[PairResult]:
+        """Every picked pair's result; ``progress(done, total)`` after each pair."""
+        picks = self.picks(frames)
+        results = []
+        for k, (i, pick) in enumerate(picks):
+            results.append(self.pair(frames, i, pick))
+            if progress:
+                progress(k + 1, len(picks))
+        return results

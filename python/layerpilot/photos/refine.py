@@ -8,7 +8,9 @@ give) comes from GNSS. The partner's pose is then the reference camera's pose co
 the image-derived relative pose: the pair is self-consistent, the reference camera keeps its
 GNSS position and attitude. A pair is rejected when the images and GNSS/attitude disagree by
 more than ``max_rotation_deg`` in rotation or ``max_direction_deg`` in baseline direction, or
-when too few matches survive RANSAC.
+when too few matches survive RANSAC (fewer than ``min_inliers`` or ``min_inlier_ratio`` of
+the matches: on the forest of the first flight line a quarter of the matches fit an essential
+matrix whose depths were wrong everywhere).
 
 One disagreement is corrected instead (``flip_heading``): when the images put the partner on
 the opposite side of where GNSS puts it, the recorded heading is 180 degrees off (on the
@@ -42,7 +44,7 @@ class Refinement:
     reason: str  # "ok" or why the pair was rejected
 
 
-_HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # 180 degrees about the vertical (map z)
+HALF_TURN = np.diag([-1.0, -1.0, 1.0])  # 180 degrees about the vertical (map z)
 
 
 def angle_deg(R: np.ndarray) -> float:
@@ -104,9 +106,9 @@ class PoseRefiner:
         direction = math.degrees(math.acos(float(np.clip(t @ t_gnss / baseline, -1.0, 1.0))))
         flipped = direction > 180.0 - c.max_direction_deg and c.flip_heading
         if flipped:  # the images see the partner behind where GNSS puts it: the heading is off by 180 degrees
-            ref = replace(ref, pose=Pose.from_rotation(_HALF_TURN @ ref.pose.rotation, ref.pose.position))
+            ref = replace(ref, pose=Pose.from_rotation(HALF_TURN @ ref.pose.rotation, ref.pose.position))
             direction = 180.0 - direction
-        reason = ("too_few_inliers" if inliers < c.min_inliers else
+        reason = ("too_few_inliers" if inliers < max(c.min_inliers, c.min_inlier_ratio * len(pa)) else
                   "rotation_disagrees" if rotation > c.max_rotation_deg else
                   "direction_disagrees" if direction > c.max_direction_deg else "ok")
         if reason != "ok":
