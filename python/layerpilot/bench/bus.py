@@ -2,17 +2,23 @@
 
 The reference for the query is a bare Zenoh queryable answering a payload of the same size
 from memory: the ratio says what the map (column extraction + encoding) adds to transport.
+The breakdown times each step of a query in process (median of the same number of runs):
+the map's column extraction (C++), the layer-set encoding, and the pilot's decoding (not
+part of the round trip, but paid by every reader).
 """
 
 from __future__ import annotations
 
 import json
+import os
+import platform
 import time
 
 import numpy as np
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
+from layerpilot.bus.layerset import decode_layer_set, encode_columns, to_column_layers
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import PointCloud
 from layerpilot.mission.config import Mission
@@ -68,6 +74,7 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         time.sleep(0.3)
         ref_rtt, _ = _round_trips(client, "bench/reference", queries)
         ref.undeclare()
+        steps = _breakdown(server, window, resolution, queries)
     finally:
         server.stop()
         client.close()
@@ -82,7 +89,28 @@ def run(seconds: float = 5.0, rate: float = 10.0, width: int = 320, height: int 
         "layer_query_ms_p95": round(1e3 * float(np.percentile(rtt, 95)), 2),
         "reference_same_bytes_ms_median": round(1e3 * float(np.median(ref_rtt)), 2),
         "ratio_vs_reference": round(float(np.median(rtt) / np.median(ref_rtt)), 2),
+        **steps,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}",
     }
+
+
+def _breakdown(server: MapServer, window: int, resolution: float, n: int) -> dict[str, float]:
+    """Median ms of each step of a layer query, in process."""
+    half = window * resolution / 2
+    columns = server.service.columns(-half, -half, window, window)
+    payload = encode_columns(columns, 0.0, K.vehicle)
+    steps = {"columns": lambda: server.service.columns(-half, -half, window, window),
+             "encode": lambda: encode_columns(columns, 0.0, K.vehicle),
+             "decode": lambda: to_column_layers(decode_layer_set(payload))}
+    out = {}
+    for name, fn in steps.items():
+        times = []
+        for _ in range(n):
+            t = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t)
+        out[f"{name}_ms_median"] = round(1e3 * float(np.median(times)), 2)
+    return out
 
 
 def _round_trips(session, selector: str, n: int) -> tuple[list[float], int]:

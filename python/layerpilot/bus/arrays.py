@@ -1,4 +1,7 @@
-"""numpy <-> protobuf ``Array``: raw little-endian bytes with dtype and shape, optionally zlib'd.
+"""numpy <-> protobuf ``Array``: raw little-endian bytes with dtype and shape, optionally compressed.
+
+LZ4 (a block, no stored size: the declared shape gives it) costs about 0.1 ms per MB
+either way, zlib 5 to 60 ms per MB for a better ratio: zlib is for what must be small.
 
 Decoding checks everything a sender could get wrong (dtype, shape, byte count, compression)
 and raises ``BadMessage`` with the reason, so no malformed array reaches a node's logic.
@@ -8,6 +11,7 @@ from __future__ import annotations
 
 import zlib
 
+import lz4.block
 import numpy as np
 
 from layerpilot.bus.proto_gen import messages_pb2 as pb
@@ -17,21 +21,27 @@ DTYPES = ("bool", "uint8", "uint16", "float16", "float32", "float64")
 MAX_ITEMS = 1 << 28  # no honest message holds more; guards memory against forged shapes
 
 
-def to_proto(arr: np.ndarray, out: pb.Array | None = None, *, compress: bool = False) -> pb.Array:
-    """Fill ``out`` (or a new Array) with ``arr``; the dtype must be one of ``DTYPES``."""
+CODECS = {"none": pb.Array.NONE, "zlib": pb.Array.ZLIB, "lz4": pb.Array.LZ4}
+
+
+def to_proto(arr: np.ndarray, out: pb.Array | None = None, *, compress: str = "none") -> pb.Array:
+    """Fill ``out`` (or a new Array) with ``arr``; the dtype must be one of ``DTYPES``; ``compress``: a ``CODECS`` name."""
     arr = np.asarray(arr)
     if arr.dtype.name not in DTYPES:
         raise ValueError(f"arr: dtype {arr.dtype} cannot travel on the bus; use one of {', '.join(DTYPES)}")
     msg = pb.Array() if out is None else out
     msg.dtype = arr.dtype.name
     msg.shape[:] = arr.shape
-    data = np.ascontiguousarray(arr, arr.dtype.newbyteorder("<")).tobytes()
-    if compress:
+    if compress not in CODECS:
+        raise ValueError(f"compress: unknown {compress!r}; known: {', '.join(CODECS)}")
+    data = np.ascontiguousarray(arr, arr.dtype.newbyteorder("<")).data
+    if compress == "zlib":
         msg.data = zlib.compress(data, 1)
-        msg.compression = pb.Array.ZLIB
+    elif compress == "lz4":
+        msg.data = lz4.block.compress(data, store_size=False)
     else:
-        msg.data = data
-        msg.compression = pb.Array.NONE
+        msg.data = bytes(data)
+    msg.compression = CODECS[compress]
     return msg
 
 
@@ -65,6 +75,11 @@ def from_proto(msg: pb.Array, name: str, *, dtype: str | tuple[str, ...] | None 
             data = d.decompress(data, expected + 1)
         except zlib.error as exc:
             raise BadMessage("bad compression", f"{name}: zlib: {exc}") from None
+    elif msg.compression == pb.Array.LZ4:
+        try:  # the output buffer is the declared size: a forged block cannot inflate past it
+            data = lz4.block.decompress(data, uncompressed_size=max(expected, 1))
+        except lz4.block.LZ4BlockError as exc:
+            raise BadMessage("bad compression", f"{name}: lz4: {exc}") from None
     elif msg.compression != pb.Array.NONE:
         raise BadMessage("bad compression", f"{name}: unknown compression {msg.compression}")
     if len(data) != expected:

@@ -34,6 +34,7 @@ from layerpilot.nodes.supervise import Supervisor
 _log = logging.getLogger("layerpilot.map_server")
 SNAPSHOT_CHECK = 0.5  # s between looks at the snapshot policy
 WAIT = 0.5  # s a worker waits for work before it beats its heartbeat again
+LAYER_CACHE = 16  # encoded layer sets kept for the current map revision (distinct windows asked for)
 
 
 class MapServer:
@@ -53,6 +54,8 @@ class MapServer:
         self._pool = ThreadPoolExecutor(self.cfg.query_threads, thread_name_prefix="map-query")
         self._decls: list = []
         self._next_publish = time.monotonic()
+        self._layer_cache: dict[tuple, tuple[int, bytes]] = {}  # window -> (map revision, encoded layer set)
+        self._layer_cache_lock = threading.Lock()
 
     @property
     def map(self):
@@ -105,8 +108,22 @@ class MapServer:
 
     def layer_set(self, vehicle: str, x: float | None = None, y: float | None = None, w: int | None = None,
                   h: int | None = None, names: tuple[str, ...] | None = None) -> bytes:
-        cl = self.service.columns(x, y, w, h)
-        return encode_columns(cl, self.service.last_stamp, vehicle, names or self.cfg.layers)
+        """A window's column layers, encoded once per map change: every reader asking for the same
+        window between two insertions (the periodic publisher, pilots, viewers) shares the bytes."""
+        names = names or self.cfg.layers
+        revision = self.service.clouds_inserted  # read first: a cloud landing meanwhile makes the next ask miss
+        key = (vehicle, x, y, w, h, names)
+        with self._layer_cache_lock:
+            hit = self._layer_cache.get(key)
+        if hit is not None and hit[0] == revision:
+            return hit[1]
+        data = encode_columns(self.service.columns(x, y, w, h), self.service.last_stamp, vehicle, names)
+        with self._layer_cache_lock:
+            for k in [k for k, (rev, _) in self._layer_cache.items() if rev != revision]:
+                del self._layer_cache[k]  # an older map's
+            if len(self._layer_cache) < LAYER_CACHE:
+                self._layer_cache[key] = (revision, data)
+        return data
 
     def _publish_due(self) -> bool:
         """A layer set per mission vehicle every 1 / layers_rate s (the transport's pacing: wall clock).
