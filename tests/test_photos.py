@@ -77,7 +77,7 @@ def test_refinement_beats_raw_poses_against_the_reference(folder):
 
 def test_map_images_writes_the_run_directory(folder, tmp_path, capsys):
     out = tmp_path / "run"
-    cli_main(["map", "images", str(folder), "--out", str(out)])
+    cli_main(["map", "images", str(folder), "--out", str(out), "--width", "640"])
     printed = capsys.readouterr().out
     assert "skipped DJI_NOGPS.JPG: no GPS position in EXIF" in printed
     for name in ("map.ot", "map.bt", "frame.json", "cameras.csv", "pairs.csv", "report.html", "metrics.json",
@@ -87,3 +87,37 @@ def test_map_images_writes_the_run_directory(folder, tmp_path, capsys):
     assert metrics["final"]["accepted"] == 1 and metrics["final"]["observed_columns"] > 1000
     cameras = np.genfromtxt(out / "cameras.csv", delimiter=",", names=True, dtype=None, encoding=None)
     assert len(cameras) == 2 and cameras["lat"][0] == pytest.approx(read_metadata(folder / PAIR[0]).lat, abs=1e-7)
+
+
+def test_gimbal_angles_give_the_camera_axes_in_enu():
+    from layerpilot.photos.attitude import camera_rotation
+
+    nadir_north = camera_rotation(0.0, -90.0, 0.0)  # columns: camera x, y, z in ENU
+    assert nadir_north == pytest.approx(np.array([[1, 0, 0], [0, -1, 0], [0, 0, -1]]), abs=1e-12)
+    east = camera_rotation(90.0, -90.0, 0.0)  # heading east: the image's top (-y) points east
+    assert -east[:, 1] == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)
+    forward = camera_rotation(0.0, 0.0, 0.0)  # level gimbal looking north
+    assert forward[:, 2] == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+
+
+def test_calibration_file_overrides_exif_intrinsics(folder, tmp_path):
+    import cv2
+
+    from layerpilot.photos.calibration import read_calibration
+
+    path = tmp_path / "cam.yaml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 4000)
+    fs.write("image_height", 2250)
+    fs.write("camera_matrix", np.array([[2300.0, 0, 2010.0], [0, 2300.0, 1120.0], [0, 0, 1]]))
+    fs.write("distortion_coefficients", np.array([[-0.01, 0.01, 0.0, 0.0, 0.0]]))
+    fs.release()
+    f = read_folder(folder, calibration=read_calibration(path), width=500)
+    k = f.frame(0).intrinsics
+    assert (k.width, k.fx, k.cx) == (500, pytest.approx(2300 / 8), pytest.approx((2010 + 0.5) / 8 - 0.5))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("%YAML:1.0\n---\nimage_width: 4000\nimage_height: 2250\n")
+    with pytest.raises(ValueError, match="camera_matrix missing"):
+        read_calibration(bad)
+    with pytest.raises(ValueError, match="no .jpg photos"):
+        read_folder(tmp_path)

@@ -19,19 +19,9 @@ _NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 _CAMERA_IN_GIMBAL = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # columns: camera x, y, z
 
 
-def _zyx(yaw: float, pitch: float, roll: float) -> np.ndarray:
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cr, sr = math.cos(roll), math.sin(roll)
-    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    return rz @ ry @ rx
-
-
 def camera_rotation(yaw_deg: float, pitch_deg: float, roll_deg: float) -> np.ndarray:
     """3x3 rotation camera -> ENU of a camera with these NED gimbal angles (degrees)."""
-    r = _zyx(*(math.radians(a) for a in (yaw_deg, pitch_deg, roll_deg)))
+    r = Pose.from_euler(math.radians(roll_deg), math.radians(pitch_deg), math.radians(yaw_deg)).rotation
     return _NED_TO_ENU @ r @ _CAMERA_IN_GIMBAL
 
 
