@@ -1,7 +1,7 @@
 """`layerpilot view`: join a running mission on the bus and log what it says into a MissionScene.
 
 Zenoh callbacks only decode and keep the newest message per key (and count arrivals, for the
-rates); one worker logs them every ``period`` seconds, asks the map server for its voxels and
+rates); one worker logs them every ``period`` seconds, the path and the map server's voxels and
 statistics every ``map_period`` seconds, and turns each layer set into layer images and metrics.
 A bad message is rejected and counted like in any node; the view never publishes anything.
 """
@@ -98,6 +98,7 @@ class LiveView:
                 now = time.monotonic()
                 if now >= next_map:
                     next_map = now + self.map_period
+                    self.scene.path()
                     self._log_map()
                     rates = {f"rate/{t}": (counts[t] - last_counts[t]) / (now - last_rates) for t in counts}
                     self.scene.scalars("health", {**rates, "view/rejected": self.rejects.total})

@@ -1,6 +1,6 @@
 """The scene of a lock-step mission (`demo`, `study`): the evaluator hands over what it has, this logs it.
 
-Poses and decisions are logged as they come; the camera image and the layers every
+Poses and decisions are logged as they come; the path, the camera image and the layers every
 ``IMAGE_PERIOD`` and the voxel map every ``MAP_PERIOD`` mission seconds, so that a 600 s run's
 .rrd stays a few MB (the scene is a picture of the run, not a second copy of its map).
 """
@@ -54,6 +54,7 @@ class LockstepView:
         self.scene.pose(Pose(np.asarray(body, np.float64)))
         if t >= self._next_image - 1e-9:
             self._next_image = t + IMAGE_PERIOD
+            self.scene.path()
             self.scene.camera(frame)
             cl = voxel_map.column_layers_for(self.geometry)
             seen = cl.observed

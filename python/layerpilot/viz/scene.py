@@ -105,11 +105,14 @@ class MissionScene:
             self.stream.log(f"layers/{name}", encoded(image[::-1], ".png"))
 
     def pose(self, pose: Pose) -> None:
-        """The drone (body -> map) and one more vertex of its path."""
+        """The drone (body -> map); its position is the path's next vertex (see ``path``)."""
         w, x, y, z = pose.orientation
         self.stream.log("world/drone", rr.Transform3D(translation=pose.position, quaternion=[x, y, z, w]))
         self._path.append(np.asarray(pose.position, np.float64))
         del self._path[:-MAX_PATH]
+
+    def path(self) -> None:
+        """The flight path so far (logged on the caller's period: each call stores the whole path again)."""
         if len(self._path) > 1:
             self.stream.log("world/path", rr.LineStrips3D([np.array(self._path)], colors=[[255, 60, 60]]))
 

@@ -45,5 +45,23 @@ def open_stream(name: str, *, save: str | Path | None = None, web_port: int | No
     if spawn:
         rr.spawn(connect=False)
         sinks.append(rr.GrpcSink())
-    stream.set_sinks(*sinks)
+    stream.set_sinks(*sinks, default_blueprint=layout())
     return ViewStream(stream, url)
+
+
+def layout():
+    """The viewer's first layout: the 3D scene large; layers, camera, decisions and time series beside it."""
+    import rerun.blueprint as rrb
+
+    layers = [rrb.Spatial2DView(origin=f"layers/{name}", name=name)
+              for name in ("color", "elevation", "time_since_seen", "distance")]
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="mission"),
+            rrb.Vertical(rrb.Tabs(*layers, rrb.Spatial2DView(origin="world/camera", name="camera")),
+                         rrb.TextLogView(origin="decision", name="decisions"),
+                         rrb.Tabs(rrb.TimeSeriesView(origin="metrics", name="metrics"),
+                                  rrb.TimeSeriesView(origin="health", name="node health"))),
+            column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed"))
