@@ -48,6 +48,19 @@ def _box(changed: np.ndarray) -> GridWindow | None:
     return GridWindow(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
 
+def _changed(old: np.ndarray, new: np.ndarray) -> GridWindow | None:
+    """The box of cells where two bool masks differ, comparing 8 cells at a time where rows allow."""
+    if old.shape[1] % 8 or not (old.flags.c_contiguous and new.flags.c_contiguous):
+        return _box(old != new)
+    coarse = _box(old.view(np.uint64) != new.view(np.uint64))
+    if coarse is None:
+        return None
+    cols = slice(8 * coarse.col0, 8 * coarse.col1)
+    fine = _box(old[coarse.row0:coarse.row1, cols] != new[coarse.row0:coarse.row1, cols])
+    return GridWindow(fine.row0 + coarse.row0, fine.row1 + coarse.row0,
+                      fine.col0 + 8 * coarse.col0, fine.col1 + 8 * coarse.col0)
+
+
 def _gap(lo: int, hi: int, n: int) -> np.ndarray:
     """Per index 0..n-1: cells to the range [lo, hi) (0 inside), float32: a lower bound of the distance to it."""
     i = np.arange(n, dtype=np.float32)
@@ -97,6 +110,8 @@ class ClosedDistance:
         self.closed: np.ndarray | None = None
         self.dist: np.ndarray | None = None
         self.zeros = 0  # unobserved cells of the closed mask
+        self.row_max: np.ndarray | None = None  # largest distance of each row and column, kept with ``dist``
+        self.col_max: np.ndarray | None = None
         self.lock = threading.Lock()  # hold it across ``update`` and reading what it returns
 
     def update(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +119,7 @@ class ClosedDistance:
         if self.observed is None or self.observed.shape != observed.shape:
             self._whole(observed)
         else:
-            changed = _box(self.observed != observed)
+            changed = _changed(self.observed, observed)
             if changed is not None:
                 self._patch(observed, changed)
         return self.closed, self.dist
@@ -114,6 +129,7 @@ class ClosedDistance:
         self.closed = closed_mask(observed, self.closing)
         self.zeros = int(self.closed.size - np.count_nonzero(self.closed))
         self.dist = _transform(self.closed)
+        self.row_max, self.col_max = self.dist.max(axis=1), self.dist.max(axis=0)
 
     def _patch(self, observed: np.ndarray, changed: GridWindow) -> None:
         h, w = observed.shape
@@ -131,7 +147,9 @@ class ClosedDistance:
                              flipped.col0 + touched.col0, flipped.col1 + touched.col0)
         # cells whose nearest unobserved column may have moved: d(p) >= distance from p to the flipped box.
         # Their box lies within the rows whose largest d reaches the box's rows, and the same for columns.
-        rows = np.flatnonzero(self.dist.max(axis=1) >= _gap(flipped.row0, flipped.row1, h) - 1e-3)
-        cols = np.flatnonzero(self.dist.max(axis=0) >= _gap(flipped.col0, flipped.col1, w) - 1e-3)
+        rows = np.flatnonzero(self.row_max >= _gap(flipped.row0, flipped.row1, h) - 1e-3)
+        cols = np.flatnonzero(self.col_max >= _gap(flipped.col0, flipped.col1, w) - 1e-3)
         stale = GridWindow(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
         self.dist[stale.slices] = distance_on(self.closed, stale)
+        self.row_max[stale.row0:stale.row1] = self.dist[stale.row0:stale.row1].max(axis=1)
+        self.col_max[stale.col0:stale.col1] = self.dist[:, stale.col0:stale.col1].max(axis=0)
