@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Iterator
 
 import zenoh
-from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.well_known import MessageEncoding
@@ -193,7 +192,7 @@ class RecordingReader:
                         if (message := self._ours(record, channels, schemas)) is not None:
                             self.position = f.tell()
                             yield message
-            except (McapError, ValueError, EOFError, OSError) as exc:  # truncated, bad CRC, garbage
+            except Exception as exc:  # truncated, bad CRC, a chunk that does not decompress: all damage
                 what = str(exc) or "the file ends in the middle of a record"
                 self.damage = (f"{self.path}: damaged near byte {f.tell()} ({type(exc).__name__}: {what}); "
                                f"read {sum(self.counts.values())} messages before it")

@@ -61,11 +61,11 @@ class LockstepView:
             self.scene.layers({"color": cl.color, "elevation": np.where(seen, cl.elevation, np.nan),
                                "time_since_seen": np.where(seen, t - cl.last_seen, np.nan),
                                "distance": np.where(seen, cl.min_distance, np.nan)}, self.geometry)
-        if t >= self._next_map - 1e-9:
-            self._next_map = t + MAP_PERIOD
+        if t >= self._next_map - 1e-9:  # the first map as soon as there is one, then every MAP_PERIOD
             x0, x1, y0, y1 = self.geometry.extent
-            self.scene.voxels(voxel_map.voxels(np.array([x0, y0, BOX_HEIGHT[0]]), np.array([x1, y1, BOX_HEIGHT[1]])),
-                              t, voxel_map.resolution)
+            box = np.array([x0, y0, BOX_HEIGHT[0]]), np.array([x1, y1, BOX_HEIGHT[1]])
+            if self.scene.voxels(voxel_map.voxels(*box), t, voxel_map.resolution):
+                self._next_map = t + MAP_PERIOD
 
     def decision(self, t: float, record: Mapping) -> None:
         """A command's decisions.jsonl record: its waypoint, runner-up and explanation."""

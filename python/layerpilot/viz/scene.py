@@ -82,9 +82,10 @@ class MissionScene:
         """Everything logged next happens at mission time ``t`` (s)."""
         self.stream.set_time(TIMELINE, duration=float(t))
 
-    def voxels(self, v: Voxels, now: float, resolution: float) -> None:
+    def voxels(self, v: Voxels, now: float, resolution: float) -> bool:
+        """The occupied voxels, replacing the previous ones; False when there were none (nothing logged)."""
         if len(v) == 0:
-            return
+            return False
         if self.color_by == "color":
             colors = v.color
         elif self.color_by == "height":
@@ -96,6 +97,7 @@ class MissionScene:
                                                     colors=colors, fill_mode="solid"))
         else:
             self.stream.log("world/map", rr.Points3D(v.centers, colors=colors, radii=resolution / 2))
+        return True
 
     def layers(self, images: Mapping[str, np.ndarray], geometry: GridGeometry) -> None:
         """2D layers as images, north up (row 0 of a layer is its southern edge); RGB ones as they are."""
