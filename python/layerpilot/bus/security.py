@@ -69,7 +69,7 @@ def grants(vehicles: list[str], operator_can_save: bool = False) -> dict[str, Gr
     for v in vehicles:
         k = keys.Keys(v)
         out[node_user("sim", v)] = Grant(publish=(k.camera,), subscribe=(k.pose,))  # pose: camera-only mode
-        out[node_user("link", v)] = Grant(publish=(k.pose,), subscribe=(k.waypoint,))
+        out[node_user("link", v)] = Grant(publish=(k.pose,), subscribe=(k.waypoint, k.state))  # state: battery RTL
         out[node_user("depth", v)] = Grant(publish=(k.cloud,), subscribe=(k.camera,))
         out[node_user("decide", v)] = Grant(publish=(k.waypoint, k.decision, k.state),
                                             subscribe=(k.layers, k.pose, keys.all_vehicles("decision")),

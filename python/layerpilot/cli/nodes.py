@@ -26,7 +26,9 @@ def register(commands: argparse._SubParsersAction) -> None:
                          "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)",
                          flags={"snapshot": "map_server.snapshot"})
     p.add_argument("--snapshot", help="snapshot .ot path (reloaded at start); '' for none")
-    add_node_command(commands, "decide", _decide, "layer sets + pose in, decisions and waypoints out")
+    p = add_node_command(commands, "decide", _decide, "layer sets + pose in, decisions and waypoints out")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the survey saved in decide.state (path history, schedule phase, counts)")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
@@ -39,6 +41,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--mission", help="mission file or name in config/missions/ (default: default)")
     p.add_argument("--endpoint", help="Zenoh endpoint the nodes meet at (default: the mission's)")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between status blocks")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the survey where it stopped (after a battery swap): the decide nodes load "
+                        "decide.state, the map server its newest snapshot")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
     p.add_argument("--secrets", help="bus.security on: each node's and the operator's credentials go here "
@@ -188,7 +193,7 @@ def _map_server(args, mission, vehicle, session) -> Running:
 def _decide(args, mission, vehicle, session) -> Running:
     from layerpilot.nodes.decide import DecideNode
 
-    node = DecideNode(session, vehicle, mission)
+    node = DecideNode(session, vehicle, mission, resume=args.resume)
     node.start()
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
@@ -219,5 +224,6 @@ def _up(args: argparse.Namespace) -> int:
     from layerpilot.nodes.up import up
 
     return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
-              log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save, record=args.record)
+              log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save,
+              resume=args.resume, record=args.record)
 

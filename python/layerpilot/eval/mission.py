@@ -11,8 +11,10 @@ and the pilot steps on every simulator step with the newest one, as the decide n
 with the newest layer set and pose it heard. Everything is a function of the seeds: the
 take-off (connect, pre-arm, GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's
 wall-clock waits and is not scored; when it is done the vehicle is placed exactly at the
-hover point (0, 0, altitude) at rest and the mission clock starts at 0 there. Two runs with
-the same mission are identical to the bit.
+hover point (0, 0, altitude) at rest with a full battery and the mission clock starts at 0
+there. Two runs with the same mission are identical to the bit. The pilot hears the battery
+as the autopilot reports it (SYS_STATUS's whole percent, read from the endpoint in step);
+once it turns home for the battery the mission ends when it is there (``ended`` in the report).
 
 Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin
 at the EKF origin on the ground at home (the decide behavior's altitude is a height above
@@ -124,6 +126,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     from layerpilot.layers import LayerContext, compute_layers
     from layerpilot.link.link import WaypointRefused
     from layerpilot.map import VoxelMap
+    from layerpilot.mission import resume as survey
     from layerpilot.mission.build import build_depth_service, build_pilot
     from layerpilot.mission.map_service import MapService
     from layerpilot.sim.simulator import Simulator
@@ -162,6 +165,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             sim.endpoint.step(ev.step_s)
             v = sim.vehicle
             v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + origin, 0.0, 0.0, 0.0, 0.0
+            sim.endpoint.battery.swap()  # full at the mission clock's 0: the wall-paced take-off must not count
             steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
             progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", progress_stream)
             next_frame = next_layers = t = 0.0
@@ -179,7 +183,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                     columns = wire.to_column_layers(wire.decode_layer_set(message))
                 position = sim.endpoint.pose().position - origin  # in the map frame
                 evaluations = pilot.evaluations
-                command = pilot.step(position, t, columns)
+                charge = round(100 * sim.endpoint.battery.remaining) / 100  # SYS_STATUS's whole percent
+                command = pilot.step(position, t, columns, battery=charge)
                 if record_inputs and pilot.evaluations != evaluations:
                     inputs.append(PilotInput(t, tuple(float(c) for c in position), message, command))
                 if command is not None:
@@ -209,8 +214,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                     view.metrics(t, sampler.series.last())
                 last = sampler.series.last() if len(sampler.series) else {}
                 progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(records)}")
-                if t >= ev.duration - 1e-9:
-                    break
+                if t >= ev.duration - 1e-9 or (pilot.ending and pilot.arrived(position)):
+                    break  # the duration, or home after the pilot turned home (its flight is over)
                 sim.endpoint.step(ev.step_s)
                 steps += 1
                 t = steps * ev.step_s
@@ -222,6 +227,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
 
     est = service.map
     est.save(out / "map.ot")
+    survey.save(pilot, out / "survey.json", t, t)  # the pilot's state: `decide --resume` can go on from here
     est.export_bt(out / "map.bt")
     with open(out / "decisions.jsonl", "w") as f:
         for record in records:
@@ -231,6 +237,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
     settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
+                "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending else "duration",
                 "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                 "frames": frames, "clouds": depth.clouds,
                 **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud

@@ -24,6 +24,7 @@ from layerpilot.decide.maker import DecisionMaker
 from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
+from layerpilot.mission.energy import HomeReturn
 
 PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
 
@@ -37,10 +38,15 @@ class PilotConfig:
     home: tuple[float, float] = (0.0, 0.0)  # launch / operator point (map frame)
     speed: float = 0.0  # m/s sent with each MCDM waypoint, 0 = autopilot default (patterns set their own)
     seed: int | None = None  # decision noise seed; None = the behavior's
+    battery_reserve: float = 0.25  # charge (0..1) to land with: the pilot turns home in time to keep it
+    return_speed: float = 5.0  # m/s the way home is reckoned at (mission.energy)
+    state: str = ""  # directory the survey's state is saved in, for `up --resume` (mission.resume); "" = none
 
     def __post_init__(self) -> None:
         check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)
         check_range("decide.speed", self.speed, 0.0, 100.0)
+        check_range("decide.battery_reserve", self.battery_reserve, 0.0, 0.9)
+        check_range("decide.return_speed", self.return_speed, 0.1, 100.0)
         load_pilot_behavior(self.behavior)  # a bad name or file fails when the mission loads
 
     @property
@@ -62,15 +68,16 @@ class Command:
     position: tuple[float, float, float]
     yaw: float
     speed: float
-    decision: Decision | None  # None for a scripted pattern
-    reason: str  # "start", "reached", "retarget", "conflict" (a drone with priority took our target)
+    decision: Decision | None  # None for a scripted pattern and the way home
+    reason: str  # "start", "reached", "retarget", "conflict" (a drone with priority took our target), "resume",
+    #              "battery" (home: the charge left needs it; the last command of the flight)
 
     def record(self) -> dict[str, Any]:
         """One JSON-ready line for decisions.jsonl (the same in every driver)."""
         out: dict[str, Any] = {"seq": self.seq, "time": self.time, "waypoint": list(self.position),
                                "yaw": self.yaw, "speed": self.speed, "reason": self.reason}
         if self.decision is None:
-            out["scripted"] = True
+            out["scripted"] = self.reason != "battery"
         else:
             out.update(self.decision.to_dict())
             out["explanation"] = self.decision.explain()
@@ -97,6 +104,9 @@ class Pilot:
         self._next_pattern = 0
         self._reconsidered: ColumnLayers | None = None
         self._waiting: str | None = None  # why a new command is due, while it waits for layers
+        self.energy = HomeReturn(cfg.home, cfg.battery_reserve, cfg.return_speed)
+        self.ending = ""  # "battery" once turned home: the flight's last command went out
+        self.ticks: list[tuple[float, ...]] = []  # (x, y, *geometry) of each history tick, for mission.resume
 
     @property
     def cruise_speed(self) -> float:
@@ -114,14 +124,26 @@ class Pilot:
         return math.hypot(position[0] - self.target[0], position[1] - self.target[1]) <= self.cfg.arrival_radius
 
     def step(self, position: Sequence[float], time: float, columns: ColumnLayers | None,
-             avoid: Sequence[Sequence[float]] = (), yield_to: Sequence[Sequence[float]] = ()) -> Command | None:
+             avoid: Sequence[Sequence[float]] = (), yield_to: Sequence[Sequence[float]] = (),
+             battery: float = math.nan) -> Command | None:
         """A new command when one is due, else None. ``columns``: the newest column layers (None: none yet).
+
+        ``battery``: the charge left (0..1, NaN unknown); once the way home plus ``battery_reserve``
+        needs all of it, the command is home at the behavior's altitude (reason ``battery``) and
+        nothing follows it (``ending``).
 
         ``avoid``: other drones' current targets (x, y); the maker keeps r_e away from them.
         ``yield_to``: those of drones with priority: when one of them chose a target within
         r_e of ours (both decided before hearing each other), we choose again.
         A retargeting behavior is reconsidered once per new ``columns`` object while flying.
         """
+        if self.ending:
+            return None
+        if self.energy.due(position, time, battery):
+            self.ending = "battery"
+            home = (self.cfg.home[0], self.cfg.home[1], float(self.behavior.altitude))
+            yaw = math.atan2(home[1] - position[1], home[0] - position[0])
+            return self._command(time, home, yaw, 0.0, None, "battery")
         if self.target is None:
             reason = self._waiting or "start"
         elif self.arrived(position):
@@ -141,6 +163,9 @@ class Pilot:
             self._reconsidered = columns
             decision = self.maker.decide(self._layers(columns, position, time), position, time, avoid=avoid,
                                          widen=lambda window: self._layers(columns, position, time, window))
+            g = columns.geometry  # the tick happened: remember where, for mission.resume
+            self.ticks.append((float(position[0]), float(position[1]), g.origin_x, g.origin_y, g.resolution,
+                               g.width, g.height))
             return self._from_decision(decision, position, time, reason)
         if not self.retargets or columns is None or columns is self._reconsidered:
             return None

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -26,7 +27,9 @@ from layerpilot.bus.messages import (Decision, MissionState, State, Term, Waypoi
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.map.columns import ColumnLayers
+from layerpilot.mission import resume as survey
 from layerpilot.mission.build import build_pilot
+from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.config import Mission
 from layerpilot.mission.pilot import Command
 from layerpilot.nodes.supervise import Supervisor
@@ -52,9 +55,14 @@ def decision_message(command: Command, vehicle: str, behavior: str) -> Decision:
 
 class DecideNode:
     def __init__(self, session: zenoh.Session, vehicle: str, mission: Mission,
-                 supervisor: Supervisor | None = None) -> None:
+                 supervisor: Supervisor | None = None, resume: bool = False) -> None:
+        """``resume``: continue the survey saved in ``decide.state`` (ValueError if there is none)."""
         self.session, self.keys, self.mission = session, keys.Keys(vehicle), mission
         self.pilot = build_pilot(mission)
+        self.state_path = survey.state_file(mission.decide.state, vehicle) if mission.decide.state else None
+        self.resumed = survey.load(self.pilot, self._require_state()) if resume else None
+        self._flown_before = self.resumed["flown_s"] if self.resumed else 0.0  # mission s of earlier flights
+        self._first_stamp: float | None = None
         self.rejects = Rejects(_log)
         self.supervisor = supervisor or Supervisor(_log)
         self._columns: ColumnLayers | None = None
@@ -66,6 +74,7 @@ class DecideNode:
         self._decls: list = []
         self.distance_flown = 0.0
         self._waypoint_msg: bytes | None = None
+        self._state_msg: bytes | None = None
         self._sent_at = 0.0
 
     @property
@@ -92,6 +101,19 @@ class DecideNode:
         for d in self._decls:
             d.undeclare()
         self.supervisor.join()
+        if self._state is not None:
+            self._save(self._state.stamp)
+
+    def _require_state(self) -> Path:
+        if self.state_path is None:
+            raise ValueError("--resume: decide.state is '' (no survey state is saved): nothing to resume")
+        return self.state_path
+
+    def _save(self, stamp: float) -> None:
+        """The survey's state for `up --resume` (after every command and at the end)."""
+        if self.state_path is not None:
+            flown = self._flown_before + (0.0 if self._first_stamp is None else max(0.0, stamp - self._first_stamp))
+            survey.save(self.pilot, self.state_path, stamp, flown)
 
     def _on_layers(self, ls: GridLayersMessage, key: str) -> None:
         try:
@@ -135,7 +157,10 @@ class DecideNode:
         if not fresh or state is None:
             return True
         try:
-            command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid, yield_to=yield_to)
+            if self._first_stamp is None:
+                self._first_stamp = state.stamp
+            command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid, yield_to=yield_to,
+                                      battery=state.battery)
         except INPUT_ERRORS as exc:  # e.g. the layer window misses the area of interest: wait for the next one
             self.rejects.reject(self.keys.layers, BadMessage(f"decision failed ({type(exc).__name__})", str(exc)))
             with self._cond:
@@ -155,6 +180,7 @@ class DecideNode:
         """A link that started (or restarted) late still gets its target (transport pacing: wall clock)."""
         if self._waypoint_msg is not None and time.monotonic() - self._sent_at >= REPEAT_PERIOD:
             publish(self.session, self.keys.waypoint, self._waypoint_msg)
+            publish(self.session, self.keys.state, self._state_msg)  # a battery return, too, reaches a late link
             self._sent_at = time.monotonic()
 
     def _publish(self, command: Command, state: State) -> None:
@@ -164,10 +190,14 @@ class DecideNode:
                                                       yaw=command.yaw, speed=command.speed))
         publish(self.session, self.keys.waypoint, self._waypoint_msg)
         self._sent_at = time.monotonic()
-        publish(self.session, self.keys.state, encode_mission_state(MissionState(
-            state.stamp, v, "survey", command.seq, self.pilot.reached, self.distance_flown,
-            np.array(command.position))))
-        if command.decision is not None:
+        phase = RETURN_PHASE if command.reason == "battery" else "survey"
+        self._state_msg = encode_mission_state(MissionState(state.stamp, v, phase, command.seq, self.pilot.reached,
+                                                            self.distance_flown, np.array(command.position)))
+        publish(self.session, self.keys.state, self._state_msg)
+        self._save(state.stamp)
+        if command.reason == "battery":
+            _log.warning("turning home: %s", self.pilot.energy.why)
+        elif command.decision is not None:
             _log.info("%s", command.decision.explain())
         else:
             _log.info("%s waypoint %d: (%.1f, %.1f, %.1f)", behavior, command.seq, *command.position)

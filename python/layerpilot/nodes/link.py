@@ -8,7 +8,9 @@ position: no (0, 0, 0) pose before the first LOCAL_POSITION_NED). When the node 
 (``end_action``: RTL, LAND or LOITER) and waits up to ``end_timeout`` for the autopilot to
 acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervising it. A reboot of the
 autopilot (told apart from a pilot takeover by the link) ends the flying (``on_reboot = "end"``) or
-pauses it until a pilot has the vehicle armed, airborne and in GUIDED again (``"pause"``). Pose stamps are the autopilot's
+pauses it until a pilot has the vehicle armed, airborne and in GUIDED again (``"pause"``). When the
+pilot turns home for the battery (the mission state's phase ``return: battery``) the node commands
+RTL at once: the autopilot flies home and lands, and the mission's end leaves it so. Pose stamps are the autopilot's
 clock (time_boot_ms): the simulator stamps its camera frames, and so the clouds and layer
 sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
@@ -24,13 +26,14 @@ import zenoh
 
 from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
-from layerpilot.bus.messages import State, Waypoint, decode_waypoint, encode_state
+from layerpilot.bus.messages import MissionState, State, Waypoint, decode_mission_state, decode_waypoint, encode_state
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.geometry import Pose
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
 from layerpilot.mission.config import LinkSettings
+from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.link.modes import GUIDED_MODE
 from layerpilot.nodes.runner import WAKE_PERIOD, wait_for_stop
 from layerpilot.nodes.supervise import Supervisor
@@ -58,6 +61,8 @@ class LinkNode:
         self.link = FlightLink(cfg.link, clock=self.clock, geofence=geofence)
         self._stop = threading.Event()
         self._sub = None
+        self._state_sub = None
+        self.homeward = threading.Event()  # the pilot turned home for the battery: RTL
         self.waypoints = 0
         self._last_seq = -1
         self._speed = 0.0  # m/s last asked of the autopilot; 0 = its default
@@ -90,18 +95,28 @@ class LinkNode:
                 self.supervisor.fail(f"{self.phase}: {exc}")  # the node exits 1, `up` restarts it
                 self.phase = "failed"
             return
-        self.phase = "flying"
         self._sub = self.session.declare_subscriber(self.keys.waypoint,
                                                     guarded(decode_waypoint, self._on_waypoint, self.rejects,
                                                             self.supervisor))
-        self._watch_reboots(stop)
+        self._state_sub = self.session.declare_subscriber(self.keys.state, guarded(
+            decode_mission_state, self._on_mission_state, self.rejects, self.supervisor))
+        self.phase = "flying"  # listening: a waypoint heard before is held, and decide repeats it
+        self._watch(stop)
 
-    def _watch_reboots(self, stop: threading.Event) -> None:
-        """Until ``stop``: after a reboot (the vehicle is disarmed on the ground) the flying ends, or with
-        ``on_reboot = "pause"`` waits until a pilot has it armed, airborne and in GUIDED again, then goes on
-        with the newest waypoint. A takeover is the link's own pause, not this."""
+    def _on_mission_state(self, s: MissionState, key: str) -> None:
+        if s.phase == RETURN_PHASE:
+            self.homeward.set()
+
+    def _watch(self, stop: threading.Event) -> None:
+        """Until ``stop``: a battery return commands RTL; after a reboot (the vehicle is disarmed on the
+        ground) the flying ends, or with ``on_reboot = "pause"`` waits until a pilot has it armed, airborne
+        and in GUIDED again, then goes on with the newest waypoint. A takeover is the link's own pause."""
         reboots = self.link.reboots
         while not stop.wait(WAKE_PERIOD):
+            if self.homeward.is_set() and self.phase == "flying":
+                _, self.end = self.link.end_mission("rtl", self.cfg.end_timeout)
+                self.phase = f"returning home for the battery: {self.end}"
+                _log.warning("%s", self.phase)
             if self.link.reboots == reboots:
                 continue
             reboots = self.link.reboots
@@ -181,12 +196,14 @@ class LinkNode:
         """No more waypoints, then the mission's end action (``end_action``, bounded by ``end_timeout``),
         then close the link. ``end`` says what happened (``RTL acknowledged ...`` or why not)."""
         self._stop.set()
-        if self._sub is not None:
-            self._sub.undeclare()
+        for sub in (self._sub, self._state_sub):
+            if sub is not None:
+                sub.undeclare()
         self.supervisor.join()
         if self._interrupter is not None:
             self._interrupter.join(timeout=1.0)  # its interrupt() lands before the end action clears it
-        failed, self.phase = self.phase == "failed", "ending"
-        _, self.end = self.link.end_mission(self.cfg.end_action, self.cfg.end_timeout)
+        failed, homeward, self.phase = self.phase == "failed", self.phase.startswith("returning home"), "ending"
+        if not homeward:  # an RTL for the battery stays: the autopilot flies home and lands
+            _, self.end = self.link.end_mission(self.cfg.end_action, self.cfg.end_timeout)
         self.phase = "failed" if failed else "ended"
         self.link.close()

@@ -86,9 +86,10 @@ class NodeProcess:
 
 
 def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
-                  secrets=None) -> list[NodeProcess]:
+                  secrets=None, resume: bool = False) -> list[NodeProcess]:
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide; with
-    ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file."""
+    ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file;
+    ``resume``: the decide nodes continue the saved survey (``decide --resume``)."""
     from layerpilot.bus.security import node_user
 
     base = [sys.executable, "-m", "layerpilot.cli"]
@@ -100,7 +101,9 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
         for role in ("sim", "link", "depth", "decide"):
-            nodes.append(NodeProcess(f"{role}/{v}", base + [role, "--vehicle", v] + common + login(role, v)))
+            again = ["--resume"] if resume and role == "decide" else []
+            argv = base + [role, "--vehicle", v] + common + login(role, v) + again
+            nodes.append(NodeProcess(f"{role}/{v}", argv))
     return nodes
 
 
@@ -171,7 +174,7 @@ class Supervisor:
 
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
        duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
-       operator_can_save: bool = False, record: str | Path | None = None) -> int:
+       operator_can_save: bool = False, resume: bool = False, record: str | Path | None = None) -> int:
     """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``);
     ``record``: an MCAP file every bus message is written to (bus/recording.py)."""
     from layerpilot.bus.security import open_hub
@@ -189,7 +192,14 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
         session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets), Path(log_dir))
+    if resume:  # before anything starts: a survey to continue must exist
+        from layerpilot.mission.resume import state_file
+
+        missing = [v for v in m.vehicles if not m.decide.state or not state_file(m.decide.state, v).exists()]
+        if missing:
+            raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
+                             f"({m.decide.state!r})")
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume), Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud
         from layerpilot.bus.recording import Recorder
