@@ -1,4 +1,4 @@
-"""`layerpilot bench map|decide|depth|sim|bus`: every speed claim against its reference (layerpilot.bench)."""
+"""`layerpilot bench map|decide|view|depth|sim|bus`: every speed claim against its reference (layerpilot.bench)."""
 
 from __future__ import annotations
 
@@ -24,6 +24,11 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--repeat", type=int, default=30)
     b.add_argument("--behavior", default="balanced")
     b.set_defaults(func=_decide)
+
+    b = benches.add_parser("view", help="the view_gain layer at 256 and 512 square grids vs fringe and a bare correlation")
+    b.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
+    b.add_argument("--repeat", type=int, default=10)
+    b.set_defaults(func=_view)
 
     b = benches.add_parser("depth", help="stereo precision, coverage, error and pairs/s on rendered pairs")
     b.add_argument("--sizes", type=lambda t: [size(s) for s in t.split(",")], default=[(640, 480), (320, 240)])
@@ -58,6 +63,12 @@ def _decide(args: argparse.Namespace) -> None:
     from layerpilot.bench.decide import print_decide_bench, run_decide_bench
 
     print_decide_bench(run_decide_bench(args.sizes, args.repeat, args.behavior))
+
+
+def _view(args: argparse.Namespace) -> None:
+    from layerpilot.bench.view_gain import print_view_bench, run_view_bench
+
+    print_view_bench(run_view_bench(args.sizes, args.repeat))
 
 
 def _depth(args: argparse.Namespace) -> None:

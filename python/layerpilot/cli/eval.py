@@ -27,6 +27,16 @@ def _names(text: str) -> list[str]:
     return [b.strip() for b in text.split(",") if b.strip()]
 
 
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(v) for v in _names(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated whole numbers, got {text!r}") from None
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"expected distinct seeds, got {text!r}")
+    return seeds
+
+
 def _mission_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", help="mission file or name in config/missions/ (default: default); "
                    "the flags below override its fields")
@@ -57,6 +67,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     study = commands.add_parser("study", help="compare behaviors over several seeds (the paper's six by default)")
     study.add_argument("--behaviors", type=_names, help="comma-separated list (evaluation.behaviors)")
     study.add_argument("--seeds", type=int, help="decision seeds per MCDM behavior (evaluation.seeds)")
+    study.add_argument("--world-seeds", type=_seeds, help="comma-separated forest seeds: every behavior flies "
+                       "each world (default: the mission's sim.world.seed); tables give mean ± std over all runs")
     study.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="missions in parallel")
     study.add_argument("--name", default="study", help="run directory name")
     study.add_argument("--quick", action="store_true", help="short version for CI: 60 s, 1 seed, 160x120 camera")
@@ -143,12 +155,17 @@ def _study(args: argparse.Namespace) -> None:
     ev = mission.evaluation
     out = Path(ev.out) / args.name
     jobs: list[tuple[str, object, str]] = []
-    for behavior in ev.behaviors:
-        # Scripted patterns have no decision noise: one run stands for every seed.
-        for seed in range(1 if behavior in PATTERNS else ev.seeds):
-            decide = dataclasses.replace(mission.decide, behavior=behavior, seed=seed)
-            run = dataclasses.replace(mission, decide=decide)
-            jobs.append((behavior, run, str(out / "runs" / f"{Path(behavior).stem}-s{seed}")))
+    worlds = args.world_seeds or [mission.sim.world.seed]
+    for world in worlds:
+        sim = dataclasses.replace(mission.sim, world=dataclasses.replace(mission.sim.world, seed=world))
+        for behavior in ev.behaviors:
+            # Scripted patterns have no decision noise: one run per world stands for every seed.
+            for seed in range(1 if behavior in PATTERNS else ev.seeds):
+                decide = dataclasses.replace(mission.decide, behavior=behavior, seed=seed)
+                run = dataclasses.replace(mission, decide=decide, sim=sim)
+                name = f"{Path(behavior).stem}-s{seed}" if args.world_seeds is None else \
+                    f"{Path(behavior).stem}-w{world}-s{seed}"
+                jobs.append((behavior, run, str(out / "runs" / name)))
     runs: dict[str, list[str]] = {b: [] for b in ev.behaviors}
     finals: dict[str, list[dict[str, float]]] = {b: [] for b in ev.behaviors}
     progress = Progress(len(jobs), f"study ({len(jobs)} missions, {args.jobs} at a time)", " runs")
@@ -163,10 +180,12 @@ def _study(args: argparse.Namespace) -> None:
             progress.update(done, f"{Path(run_dir).name} {final['percent_mapped']:.1f}% mapped in {wall:.0f}s")
     runs = {b: sorted(d) for b, d in runs.items()}
     shared = {k: v for k, v in to_settings(mission).items() if k not in ("decide.behavior", "decide.seed")}
+    if args.world_seeds is not None:
+        shared["sim.world.seed"] = ", ".join(map(str, worlds))
     paths = write_study_report(out, runs, {**shared, "quick": args.quick})
     with warnings.catch_warnings():  # a metric that is NaN in every seed stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
         means = {b: {k: float(np.nanmean([f[k] for f in fs])) for k in fs[0]} for b, fs in finals.items()}
-    print("mean over seeds:")
+    print("mean over worlds and seeds:" if args.world_seeds else "mean over seeds:")
     print(_table(means))
     print(f"report: {paths['html']}")

@@ -99,6 +99,29 @@ class Terrain:
 
 
 @dataclass(frozen=True)
+class Flight:
+    """How the drone flies between waypoints: camera heading, cruise speed, hop lengths (docs/decide.md).
+
+    ``heading``: ``target`` faces each new waypoint (the camera turns at every decision),
+    ``side`` looks 90 deg to the hop towards the area's centre (sideways motion, best for stereo),
+    ``fixed`` holds ``yaw_deg`` all mission long (a survey direction; 0 = east, the take-off
+    heading, i.e. "hold heading"), ``center`` faces the area's centre as the orbit does.
+    ``speed = "survey"`` cruises at the speed that puts consecutive frames one target stereo
+    baseline apart (as the lawnmower does); ``"default"`` leaves it to the mission / autopilot.
+    ``hops = "footprint"`` derives r_e and r_i from the camera's ground footprint instead of the file.
+    """
+
+    heading: Literal["target", "side", "fixed", "center"] = "target"
+    yaw_deg: float = 0.0
+    speed: Literal["default", "survey"] = "default"
+    hops: Literal["fixed", "footprint"] = "fixed"
+
+    def __post_init__(self) -> None:
+        if not -360.0 <= self.yaw_deg <= 360.0:
+            raise ValueError(f"yaw_deg = {self.yaw_deg} is out of range [-360, 360]")
+
+
+@dataclass(frozen=True)
 class Behavior:
     """One behavior: layer weights, distance ring, path history, noise, altitude and options."""
 
@@ -117,6 +140,7 @@ class Behavior:
     schedule: list[SchedulePhase] = field(default_factory=list)
     retarget: Retarget = Retarget()
     terrain: Terrain = Terrain()
+    flight: Flight = Flight()
 
     def __post_init__(self) -> None:
         _check_weights(self.weights, "weights")

@@ -123,7 +123,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     from layerpilot.bus import layerset as wire
     from layerpilot.decide import area_geometry, zone_mask
     from layerpilot.depth.source import GroundTruthDepth
-    from layerpilot.layers import LayerContext, compute_layers
+    from layerpilot.layers import compute_layers
     from layerpilot.link.link import WaypointRefused
     from layerpilot.map import VoxelMap
     from layerpilot.mission import resume as survey
@@ -232,11 +232,13 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     with open(out / "decisions.jsonl", "w") as f:
         for record in records:
             f.write(json.dumps(record, default=_json_default) + "\n")
-    final_layers = compute_layers(est.column_layers_for(geometry), LayerContext(now=t, home=home,
-                                  options=pilot.behavior.layers), pilot.behavior.layer_names, est)
+    final_columns = est.column_layers_for(geometry)
+    final_layers = compute_layers(final_columns, pilot.layer_context(final_columns, position, t),
+                                  pilot.behavior.layer_names, est)
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
     settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
+                "retargets": sum(r["reason"] == "retarget" for r in records),
                 "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending else "duration",
                 "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                 "frames": frames, "clouds": depth.clouds,

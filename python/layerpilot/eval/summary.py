@@ -15,6 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from layerpilot.eval.milestones import COVERAGE_MILESTONES, never_or_spread, run_milestones
 from layerpilot.eval.pictures.plots import LABELS, plot_flight_path, plot_layer, plot_metric
 from layerpilot.eval.report import Report, format_value
 from layerpilot.eval.series import MetricSeries
@@ -78,6 +79,16 @@ def study_table(finals: Mapping[str, Sequence[Mapping[str, float]]], keys: Seque
     return [[behavior] + [mean_spread([run[k] for run in runs]) for k in keys] for behavior, runs in finals.items()]
 
 
+def milestone_table(milestones: Mapping[str, Sequence[Mapping[str, float]]]) -> list[list[str]]:
+    """One row per behavior: time to each coverage milestone, paired-frame ratio, retargets (mean ± std)."""
+    rows = []
+    for behavior, runs in milestones.items():
+        times = [never_or_spread([run[f"time_to_{p:g}"] for run in runs]) for p in COVERAGE_MILESTONES]
+        rows.append([behavior, *times, mean_spread([run["paired_ratio"] for run in runs]),
+                     mean_spread([run["retargets"] for run in runs])])
+    return rows
+
+
 def _final(run_dir: Path) -> dict[str, float]:
     final = json.loads((run_dir / "metrics.json").read_text())["final"]
     return {k: float("nan") if v is None else float(v) for k, v in final.items()}
@@ -104,8 +115,13 @@ def write_study_report(
     dirs = {b: [Path(d) for d in ds] for b, ds in runs.items()}
     series = {b: [MetricSeries.read_csv(d / "metrics.csv") for d in ds] for b, ds in dirs.items()}
     finals = {b: [_final(d) for d in ds] for b, ds in dirs.items()}
+    milestones = {b: [run_milestones(s, json.loads((d / "metrics.json").read_text())["settings"])
+                      for s, d in zip(series[b], ds)] for b, ds in dirs.items()}
     report = Report("Behavior study")
-    report.heading("Table 1: final metrics (mean ± std over seeds)")
+    report.heading("Coverage speed and stereo pairing (mean ± std over worlds and seeds)")
+    report.table(["behavior", *[f"time to {p:g} % (s)" for p in COVERAGE_MILESTONES], "paired-frame ratio",
+                  "retargets"], milestone_table(milestones))
+    report.heading("Table 1: final metrics (mean ± std over worlds and seeds)")
     report.table(["behavior"] + TABLE1_HEADERS, study_table(finals, TABLE1))
     report.heading("Standard 3D metrics at d_v = 4 m")
     report.table(["behavior", "precision", "recall (completeness)", "F-score"], study_table(finals, STANDARD_3D))
@@ -124,7 +140,8 @@ def write_study_report(
         for png in sorted((ds[0] / "plots").glob("flight_path.png")) + sorted((ds[0] / "plots").glob("layer_*.png")):
             report.image(png, f"{behavior}: {png.stem.replace('_', ' ')}")
     metrics = {
-        "behaviors": {b: {"runs": [str(d) for d in ds], "final": finals[b]} for b, ds in dirs.items()},
+        "behaviors": {b: {"runs": [str(d) for d in ds], "final": finals[b], "milestones": milestones[b]}
+                      for b, ds in dirs.items()},
         "settings": dict(settings),
     }
     return report.write(out, metrics)

@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from layerpilot.layers import features
+from layerpilot.layers import features, view_gain
+from layerpilot.layers.view_gain import CameraView
 from layerpilot.layers.layerset import LayerSet
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
@@ -35,12 +36,15 @@ class LayerOptions:
 
     fringe_closing: int = 3  # cells; closing kernel that fills small unobserved holes (<= 1: none)
     max_distance: float = 100.0  # metres; observations from farther count as unobserved
+    view_stale_s: float = 300.0  # seconds; view_gain counts a cell seen this long ago as fully worth seeing again
 
     def __post_init__(self) -> None:
         if not 0 <= self.fringe_closing <= 51:
             raise ValueError(f"fringe_closing = {self.fringe_closing} is out of range [0, 51]")
         if not self.max_distance > 0:
             raise ValueError(f"max_distance = {self.max_distance} must be > 0")
+        if not self.view_stale_s > 0:
+            raise ValueError(f"view_stale_s = {self.view_stale_s} must be > 0")
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,8 @@ class LayerContext:
     home: tuple[float, float] = (0.0, 0.0)  # launch / operator point, map frame
     position: tuple[float, float, float] | None = None  # the drone, if known
     options: LayerOptions = LayerOptions()
+    view: CameraView | None = None  # the camera at a candidate (view_gain needs it)
+    aoi: np.ndarray | None = None  # bool mask of the area of interest on the columns' grid (view_gain needs it)
 
 
 LayerFunction = Callable[[ColumnLayers, Any, LayerContext], np.ndarray]
@@ -162,3 +168,4 @@ register_layer("distance", lambda c, m, ctx, window=None: features.min_distance(
     c.observed, c.min_distance, ctx.options.max_distance, window), windowed=True)
 register_layer("elevation", lambda c, m, ctx, window=None: features.elevation(c.observed, c.elevation, window),
                windowed=True)
+register_layer("view_gain", view_gain.layer)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from layerpilot.link.geofence import Geofence
+from layerpilot.mission import flight
+from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.config import Mission
 from layerpilot.mission.depth_service import DepthService, stereo_preset
 from layerpilot.mission.pilot import Pilot, load_pilot_behavior
@@ -12,8 +16,14 @@ def build_pilot(mission: Mission) -> Pilot:
     """The mission's pilot: the decision maker, or a pattern flown at the survey speed its camera allows."""
     cfg = mission.decide
     behavior = load_pilot_behavior(cfg.behavior)
-    if cfg.pattern is None:
-        return Pilot(cfg, behavior, seed=cfg.seed)
+    if cfg.pattern is None:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
+        camera, max_range = mission.sim.camera, mission.depth.max_depth
+        behavior = flight.flight_behavior(behavior, camera, max_range)
+        ratio = stereo_preset(camera.width).pick.target_baseline_ratio
+        speed = flight.cruise_speed(behavior, camera, mission.sim.frame_rate_hz, ratio, cfg.speed)
+        view = (flight.camera_view(behavior, HeadingPolicy(behavior, cfg.home), camera, max_range)
+                if "view_gain" in behavior.layer_names else None)
+        return Pilot(dataclasses.replace(cfg, speed=speed), behavior, seed=cfg.seed, view=view)
     from layerpilot.mission import patterns
 
     camera, altitude = mission.sim.camera, behavior.altitude

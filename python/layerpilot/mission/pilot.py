@@ -20,10 +20,13 @@ import numpy as np
 from layerpilot.config import check_range
 from layerpilot.decide.behavior import Behavior, load_behavior
 from layerpilot.decide.decision import Decision
+from layerpilot.decide.area import zone_mask
 from layerpilot.decide.maker import DecisionMaker
 from layerpilot.layers import LayerContext, compute_layers
+from layerpilot.layers.view_gain import CameraView
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
+from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.energy import HomeReturn
 
 PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
@@ -88,12 +91,16 @@ class Pilot:
     """Arrival check, decision maker or pattern, retargeting; transport-free and deterministic.
 
     ``pattern``: (N, 4) waypoints x, y, z, yaw flown in a loop (a patrol), or None for MCDM.
+    ``view``: the camera at a candidate, for the view_gain layer (mission.flight.camera_view).
     """
 
     def __init__(self, cfg: PilotConfig, behavior: Behavior, *, pattern: np.ndarray | None = None,
-                 pattern_speed: float = 0.0, seed: int | None = None) -> None:
+                 pattern_speed: float = 0.0, seed: int | None = None, view: CameraView | None = None) -> None:
         self.cfg = cfg
         self.behavior = behavior
+        self.heading = HeadingPolicy(behavior, cfg.home)
+        self.view = view
+        self._aoi: tuple[object, np.ndarray] | None = None  # (geometry, mask) of the last layer set
         self.pattern = pattern
         self.pattern_speed = pattern_speed
         self.maker = None if pattern is not None else DecisionMaker(behavior, cfg.home, seed=seed)
@@ -177,18 +184,24 @@ class Pilot:
     def _conflicts(self, points: Sequence[Sequence[float]]) -> bool:
         return any(math.hypot(p[0] - self.target[0], p[1] - self.target[1]) < self.behavior.r_e for p in points)
 
+    def layer_context(self, columns: ColumnLayers, position: Sequence[float] | None, time: float) -> LayerContext:
+        """What the behavior's layers are computed with (also for the evaluator's final layer images)."""
+        if self._aoi is None or self._aoi[0] != columns.geometry:
+            self._aoi = (columns.geometry, zone_mask(self.behavior.area, columns.geometry, self.cfg.home) > 0.5)
+        where = None if position is None else tuple(float(v) for v in position[:3])
+        return LayerContext(now=time, home=self.cfg.home, position=where, options=self.behavior.layers,
+                            view=self.view, aoi=self._aoi[1])
+
     def _layers(self, columns: ColumnLayers, position: Sequence[float], time: float,
                 window: GridWindow | None = None):
         """The behavior's layers on the cells this tick can choose from (the maker's window), not the whole grid."""
         window = self.maker.window(columns.geometry, position) if window is None else window
-        context = LayerContext(now=time, home=self.cfg.home, position=tuple(float(v) for v in position[:3]),
-                               options=self.behavior.layers)
-        return compute_layers(columns, context, self.behavior.layer_names, window=window)
+        return compute_layers(columns, self.layer_context(columns, position, time), self.behavior.layer_names,
+                              window=window)
 
     def _from_decision(self, d: Decision, position: Sequence[float], time: float, reason: str) -> Command:
         wp = tuple(float(v) for v in d.waypoint)
-        yaw = math.atan2(wp[1] - position[1], wp[0] - position[0])  # look where the drone goes
-        return self._command(time, wp, yaw, self.cruise_speed, d, reason)
+        return self._command(time, wp, self.heading.yaw(position, wp), self.cruise_speed, d, reason)
 
     def _from_pattern(self, time: float, reason: str) -> Command:
         wp = self.pattern[self._next_pattern % len(self.pattern)]  # starts over when done, as a patrol would
