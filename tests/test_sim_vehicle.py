@@ -12,8 +12,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
 from layerpilot.link.relay import free_port
-from layerpilot.sim.geodesy import GeoOrigin
-from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
+from layerpilot.geodesy import LocalFrame
+from layerpilot.sim.mavlink_vehicle import SITL_DATUM, EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter, VehicleLimits
 
 DT = 0.02
@@ -93,15 +93,6 @@ def test_deterministic_and_motors_off_stays_on_ground():
         VehicleLimits(max_speed_h=-1.0)
 
 
-def test_geodesy_round_trip():
-    origin = GeoOrigin()
-    lat, lon, alt = origin.to_geodetic(120.0, -250.0, 33.0)
-    assert lat < origin.lat and lon > origin.lon and alt == pytest.approx(origin.alt + 33.0)
-    assert np.allclose(origin.to_enu(lat, lon, alt), (120.0, -250.0, 33.0), atol=1e-6)
-    # 1e-7 degree of latitude (MAVLink's resolution) is about 1.1 cm
-    assert origin.to_enu(origin.lat + 1e-7, origin.lon, origin.alt)[1] == pytest.approx(0.0111, abs=1e-4)
-
-
 # --- the MAVLink endpoint in lock-step with a pymavlink client ------------------------------
 
 class Bench:
@@ -171,7 +162,7 @@ def test_telemetry_and_readiness(bench):
     local = bench.last("LOCAL_POSITION_NED")
     assert (local.x, local.y, local.z) == (0.0, 0.0, 0.0)   # the EKF origin: on the ground at home, like ArduCopter
     home = bench.last("HOME_POSITION")
-    assert home.altitude == int(round((GeoOrigin().alt + 4.0) * 1000))
+    assert home.altitude == int(round((SITL_DATUM.alt + 4.0) * 1000))
     assert (home.x, home.y, home.z) == (0.0, 0.0, 0.0)      # ArduPilot sends zeros there
     origin = bench.last("GPS_GLOBAL_ORIGIN")
     assert (origin.latitude, origin.longitude, origin.altitude) == (home.latitude, home.longitude, home.altitude)
@@ -242,7 +233,7 @@ def test_guided_flight_with_type_masks_land_and_rtl(bench):
     x_stop = bench.endpoint.pose().position[0]
     assert 45.0 < x_stop < 48.0
     # GLOBAL_INT target, altitude relative to home
-    lat, lon, _ = GeoOrigin().to_geodetic(-20.0, 30.0, 0.0)
+    lat, lon, _ = SITL_DATUM.to_geodetic(-20.0, 30.0, 0.0)
     bench.client.mav.set_position_target_global_int_send(0, 1, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                                                           0b110111111000, int(round(lat * 1e7)),
                                                           int(round(lon * 1e7)), 18.0, 0, 0, 0, 0, 0, 0, 0, 0)
@@ -290,13 +281,31 @@ def test_px4_offboard_needs_a_setpoint_stream_and_falls_back():
         b.close()
 
 
+def test_the_geodetic_messages_are_the_map_frame_on_the_earth():
+    """HOME_POSITION, GPS_GLOBAL_ORIGIN and GLOBAL_POSITION_INT place map-frame points with geodesy.LocalFrame:
+    read back through it, a home 500 m east and 500 m north of the datum comes back within MAVLink's 1e-7
+    degrees (1.1 cm). (The simulator's former equirectangular formula on the equatorial radius put it 1.06 m off.)"""
+    bench = Bench(position=(500.0, 500.0, 3.0))
+    try:
+        bench.run(1.2)  # the GPS fix comes after half of prearm_delay_s
+        for kind, lat, lon, alt in (("HOME_POSITION", "latitude", "longitude", "altitude"),
+                                    ("GPS_GLOBAL_ORIGIN", "latitude", "longitude", "altitude"),
+                                    ("GLOBAL_POSITION_INT", "lat", "lon", "alt")):
+            msg = bench.last(kind)
+            x, y, z = SITL_DATUM.from_geodetic(getattr(msg, lat) * 1e-7, getattr(msg, lon) * 1e-7,
+                                               getattr(msg, alt) * 1e-3)
+            assert np.allclose((x, y, z), (500.0, 500.0, 3.0), atol=0.011), (kind, x, y, z)
+    finally:
+        bench.close()
+
+
 def test_bad_arguments():
     with pytest.raises(ValueError, match="url"):
         MavlinkVehicle(Multicopter(), "serial:/dev/null")
     with pytest.raises(ValueError, match="flavour"):
         EndpointConfig(flavour="inav")
     with pytest.raises(ValueError, match="lat"):
-        GeoOrigin(lat=95.0)
+        EndpointConfig(origin=LocalFrame(95.0, 8.5))
 
 
 def test_hold_brakes_to_the_stopping_point_without_coming_back():

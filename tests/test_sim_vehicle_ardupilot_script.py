@@ -18,12 +18,12 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.link.connection import open_connection
-from layerpilot.sim.geodesy import GeoOrigin
+from layerpilot.geodesy import LocalFrame
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 
 GROUND = -5.7
-DATUM = GeoOrigin(47.397742, 8.545594, 488.0)
+DATUM = LocalFrame(47.397742, 8.545594, 488.0)
 
 SCRIPT = r'''
 import json, sys, time

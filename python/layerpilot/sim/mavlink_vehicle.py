@@ -37,17 +37,18 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.config import check_range
+from layerpilot.geodesy import LocalFrame
 from layerpilot.link import modes
 from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_ned, ned_to_enu, yaw_enu_to_ned,
                                     yaw_ned_to_enu)
 from layerpilot.sim.battery import Battery, BatteryConfig
-from layerpilot.sim.geodesy import GeoOrigin
 from layerpilot.sim.mission_store import MESSAGES as MISSION_MESSAGES
 from layerpilot.sim.mission_store import MissionStore
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.vehicle_transport import open_transport
 
 DEFAULT_URL = "tcp:127.0.0.1:5760"
+SITL_DATUM = LocalFrame(47.397742, 8.545594, 488.0)  # the PX4/ArduPilot SITL default field near Zurich
 FORCE_DISARM_MAGIC = 21196  # ArduPilot/PX4: param2 of ARM_DISARM that forces a disarm in flight
 
 POS_IGNORE = 0b111
@@ -93,7 +94,7 @@ class EndpointConfig:
     """How the simulated autopilot behaves; times are mission seconds."""
 
     flavour: Literal["ardupilot", "px4"] = "ardupilot"
-    origin: GeoOrigin = field(default_factory=GeoOrigin)
+    origin: LocalFrame = SITL_DATUM   # where the map frame lies on the Earth (geodesy.LocalFrame)
     system_id: int = 1
     component_id: int = 1
     prearm_delay_s: float = 2.0        # GPS fix at half of it, pre-arm checks healthy after it
@@ -519,8 +520,8 @@ class MavlinkVehicle:
         else:
             self._text(mav.MAV_SEVERITY_WARNING, f"Unsupported setpoint frame {frame}")
             return None, None
-        position = self.config.origin.to_enu(msg.lat_int * 1e-7, msg.lon_int * 1e-7, alt)
-        return position, ned_to_enu(msg.vx, msg.vy, msg.vz)
+        x, y, z = self.config.origin.from_geodetic(msg.lat_int * 1e-7, msg.lon_int * 1e-7, alt)
+        return (float(x), float(y), float(z)), ned_to_enu(msg.vx, msg.vy, msg.vz)
 
     def _setpoint_stream_ok(self) -> bool:
         """PX4's offboard condition: setpoints arriving faster than ``offboard_min_rate_hz`` right now."""
@@ -644,9 +645,10 @@ class MavlinkVehicle:
     def _send_system_time(self) -> None:
         self._mav.system_time_send(0, self._boot_ms())
 
-    def _geodetic(self) -> tuple[int, int, int]:
-        lat, lon, alt = self.config.origin.to_geodetic(*self.vehicle.position)
-        return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000))
+    def _geodetic(self, point=None) -> tuple[int, int, int]:
+        """A map-frame point (default: the vehicle's) as MAVLink's lat, lon (1e-7 degrees) and altitude AMSL (mm)."""
+        lat, lon, alt = self.config.origin.to_geodetic(*(self.vehicle.position if point is None else point))
+        return int(round(float(lat) * 1e7)), int(round(float(lon) * 1e7)), int(round(float(alt) * 1000))
 
     def _send_gps_raw_int(self) -> None:
         lat, lon, alt = self._geodetic()
@@ -678,16 +680,13 @@ class MavlinkVehicle:
         """Home's latitude, longitude and altitude AMSL (the world's datum plus the terrain height under home);
         its local position relative to the EKF origin, which is home on the ground: 0, 0, 0, what ArduPilot
         always sends there (should a test move ``home``, the endpoint sends the offset, which ArduPilot would not)."""
-        lat, lon, alt = self.config.origin.to_geodetic(*self.home)
         n, e, d = map_to_local_ned(*self.home, self.ekf_origin)
-        self._mav.home_position_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                     n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self.uptime * 1e6))
+        self._mav.home_position_send(*self._geodetic(self.home), n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                     int(self.uptime * 1e6))
 
     def _send_gps_global_origin(self) -> None:
         """The EKF origin's latitude, longitude and altitude AMSL (the local NED frame's 0, 0, 0)."""
-        lat, lon, alt = self.config.origin.to_geodetic(*self.ekf_origin)
-        self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                         int(self.uptime * 1e6))
+        self._mav.gps_global_origin_send(*self._geodetic(self.ekf_origin), int(self.uptime * 1e6))
 
     def _send_ekf_status_report(self) -> None:
         if self._has_fix():
