@@ -57,4 +57,5 @@ def test_bench_map_memory_on_a_surveyed_world(capsys) -> None:
     assert m["attribute_records"] > 1000
     # the whole map, every attribute, under OctoMap's occupancy-only tree on the same data
     assert m["bytes_per_leaf"] < m["octomap_bytes_per_leaf"] and m["ratio_memory"] > 1
+    assert m["bytes_per_leaf"] < m["bytes_per_leaf_with_insert_scratch"]
     assert abs(m["total_mib"] - m["tree_mib"] - m["column_index_mib"]) <= 0.01
