@@ -3,10 +3,10 @@
 //
 // OctoMap's own readers trust the stream: a truncated file reads as a smaller tree, garbage reads
 // as nodes, and a short read leaves bytes uninitialized. So parse() first walks the WHOLE stream
-// without allocating (header fields, every node, the exact end) and only then lets OctoMap build
-// the tree from bytes known to be well formed.
+// without allocating (header fields, every node, the exact end) and only then builds the tree
+// from bytes known to be well formed. A `.ot` of layerpilot's is OctoMap's format for a node of
+// log-odds, color (3 bytes), last seen and min distance (float32 each): tree id LayerpilotVoxelTree.
 #include "voxel_map.hpp"
-#include "voxel_tree.hpp"
 
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
@@ -15,11 +15,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
-#include <istream>
 #include <sstream>
-#include <streambuf>
 #include <string_view>
-#include <type_traits>
 
 namespace layerpilot {
 namespace {
@@ -218,38 +215,43 @@ void checkEnd(const Walk& w, size_t n, const Header& h) {
          std::to_string(w.nodes));
 }
 
-// An istream over bytes already in memory (no copy).
-class MemoryBuf : public std::streambuf {
- public:
-  MemoryBuf(const char* data, size_t size) {
-    char* p = const_cast<char*>(data);
-    setg(p, p, p + size);
-  }
-  size_t consumed() const { return static_cast<size_t>(gptr() - eback()); }
-};
+// The validated node streams, read straight into the compact tree: no OctoMap tree in between,
+// so loading a map needs little more memory than the map itself.
 
-// A tree OctoMap has read, node by node into the compact tree (attributes as far as the type has them).
-template <class SrcTree, class SrcNode>
-void copyStructure(const SrcTree& src, const SrcNode* s, CompactOctree& dst, Node* d) {
-  d->log_odds = s->getLogOdds();
-  const bool leaf = !src.nodeHasChildren(s);
-  if constexpr (std::is_same_v<SrcNode, octomap::ColorOcTreeNode>) {
-    const auto c = s->getColor();
-    if (leaf && !(c.r == 0 && c.g == 0 && c.b == 0)) dst.attributes(*d).color = Rgb{c.r, c.g, c.b};
-  } else if constexpr (std::is_same_v<SrcNode, VoxelNode>) {
-    const Attributes a{s->color, s->last_seen, s->min_distance};
-    if (leaf && !(a == Attributes{})) dst.attributes(*d) = a;
-  }
-  for (unsigned i = 0; i < 8; ++i)
-    if (src.nodeChildExists(s, i)) {
-      Node* child = dst.createChild(*d, i);
-      copyStructure(src, src.getNodeChild(s, i), dst, child);
+// OcTreeBaseImpl::readNodesRecurs: a record (log-odds, then what the type adds), a child mask.
+// Attributes are kept on leaves: every one of layerpilot's, a ColorOcTree's color.
+void readOtNode(const char*& p, size_t record, CompactOctree& tree, Node& n) {
+  std::memcpy(&n.log_odds, p, sizeof(float));
+  const auto mask = static_cast<uint8_t>(p[record - 1]);
+  if (mask == 0 && record > kOcTreeNodeBytes + 1) {
+    Attributes a;
+    std::memcpy(&a.color, p + sizeof(float), sizeof(Rgb));
+    if (record == kVoxelNodeBytes + 1) {
+      std::memcpy(&a.last_seen, p + sizeof(float) + sizeof(Rgb), sizeof(float));
+      std::memcpy(&a.min_distance, p + kMinDistanceOffset, sizeof(float));
     }
+    if (!(a == Attributes{})) tree.attributes(n) = a;
+  }
+  p += record;
+  for (unsigned i = 0; i < 8; ++i)
+    if (mask & (1u << i)) readOtNode(p, record, tree, *tree.createChild(n, i));
 }
 
-template <class SrcTree>
-void copyTree(const SrcTree& src, CompactOctree& dst) {
-  if (src.getRoot()) copyStructure(src, src.getRoot(), dst, dst.createRoot());
+// OccupancyOcTreeBase::readBinaryNode: leaves get the clamping bounds, inner nodes the maximum
+// of their children (the root keeps the upper bound, as OctoMap leaves it).
+void readBtNode(const char*& p, CompactOctree& tree, Node& n, float free_log, float occupied_log) {
+  const unsigned bits = static_cast<uint8_t>(p[0]) | static_cast<uint8_t>(p[1]) << 8;
+  p += 2;
+  for (unsigned i = 0; i < 8; ++i) {
+    const unsigned code = (bits >> (2 * i)) & 3;
+    if (code != 0) tree.createChild(n, i)->log_odds = code == 1 ? free_log : occupied_log;
+  }
+  for (unsigned i = 0; i < 8; ++i)
+    if (((bits >> (2 * i)) & 3) == 3) {
+      Node& child = *tree.child(n, i);
+      readBtNode(p, tree, child, free_log, occupied_log);
+      tree.updateFromChildren(child);
+    }
 }
 
 // OcTreeBaseImpl::writeNodesRecurs of LayerpilotVoxelTree: data, then one bit per existing child.
@@ -308,27 +310,16 @@ std::unique_ptr<VoxelMap> VoxelMap::parse(const char* data, size_t n, const Sens
   checkEnd(w, n, h);
   auto map = std::make_unique<VoxelMap>(h.res, model);
   if (h.size > 0) {
-    MemoryBuf buf(data + h.data_begin, n - h.data_begin);
-    std::istream in(&buf);
+    const char* p = data + h.data_begin;
+    Node& root = *map->tree_.createRoot();
     if (h.format == FileFormat::Bt) {
-      octomap::OcTree stock(h.res);
-      stock.readBinaryData(in);
-      copyTree(stock, map->tree_);
-    } else if (h.id == "LayerpilotVoxelTree") {
-      VoxelTree stock(h.res);
-      stock.readData(in);
-      copyTree(stock, map->tree_);
-    } else if (h.id == "ColorOcTree") {
-      octomap::ColorOcTree stock(h.res);
-      stock.readData(in);
-      copyTree(stock, map->tree_);
+      const octomap::OcTree stock(h.res);  // a .bt stands for OctoMap's default clamping bounds
+      root.log_odds = stock.getClampingThresMaxLog();
+      readBtNode(p, map->tree_, root, stock.getClampingThresMinLog(), stock.getClampingThresMaxLog());
     } else {
-      octomap::OcTree stock(h.res);
-      stock.readData(in);
-      copyTree(stock, map->tree_);
+      readOtNode(p, nodeBytes(h) + 1, map->tree_, root);
     }
-    if (!in || buf.consumed() != n - h.data_begin)
-      throw std::logic_error("OctoMap read the validated node stream differently");
+    if (p != data + n) throw std::logic_error("the node stream was read differently from its validation");
   }
   map->applyModel();
   map->rebuildColumnIndex();
