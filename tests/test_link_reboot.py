@@ -13,6 +13,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from conftest import wait_for
+from layerpilot.cli import main as cli_main
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.messages import Waypoint, encode_waypoint
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
@@ -97,6 +98,26 @@ def test_a_reboot_in_flight_is_a_reboot_and_ends_goto_at_once(vehicle, link):
     assert link.position_valid and np.allclose(link.telemetry().home, (0.0, 0.0, 0.0))
     with pytest.raises(LinkError, match="not in control"):  # the link let go: nothing flies until asked again
         link.set_waypoint(10.0, 0.0, 15.0)
+
+
+def test_link_goto_on_a_vehicle_that_reboots_exits_at_once_naming_the_reboot(vehicle, capsys):
+    url = url_of(vehicle)
+    assert cli_main(["link", "--mavlink", url, "takeoff", "12"]) == 0
+    at: list[float] = []
+
+    def reboot_on_the_way() -> None:
+        wait_for(lambda: vehicle.pose().position[0] > 20.0, "the flight to start")
+        at.append(vehicle.time)
+        vehicle.reboot()
+
+    rebooter = threading.Thread(target=reboot_on_the_way)
+    rebooter.start()
+    assert cli_main(["link", "--mavlink", url, "--timeout", "60", "goto", "110", "0", "15"]) == 1
+    rebooter.join()
+    assert vehicle.time - at[0] < 10.0  # mission s (1 s wall), not the 60 s wall of --timeout
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("layerpilot link goto: error: goto: autopilot rebooted: its uptime "
+                                               "went back from "), err
 
 
 def test_a_disarm_in_flight_ends_goto_with_disarmed(vehicle, link):
