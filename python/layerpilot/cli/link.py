@@ -1,5 +1,5 @@
 """`layerpilot link`: the link node, or one action for bench tests on a real autopilot or SITL
-(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`, `upload PLAN`, `download PLAN`)."""
+(`goto X Y Z`, `takeoff ALT`, `land`, `rtl`, `upload PLAN`, `download PLAN`, `fly-plan PLAN`)."""
 
 from __future__ import annotations
 
@@ -40,12 +40,16 @@ def register(commands: argparse._SubParsersAction) -> None:
     upload.add_argument("plan", type=Path, help=".plan file (e.g. from `layerpilot plan next`)")
     download = sub.add_parser("download", help="read the vehicle's mission back into a QGroundControl .plan")
     download.add_argument("plan", type=Path, help=".plan file to write")
-    for transfer in (upload, download):
+    fly = sub.add_parser("fly-plan", help="upload a .plan, take off in GUIDED to its first item's altitude if on "
+                         "the ground, fly it in AUTO and wait until its last item is reached (ArduPilot)")
+    fly.add_argument("plan", type=Path, help=".plan file (e.g. from `layerpilot plan next`)")
+    for transfer in (upload, download, fly):
         transfer.add_argument("--item-timeout", type=float, default=1.5,
                               help="seconds to wait for each answer of the vehicle before sending again (default 1.5)")
         transfer.add_argument("--retries", type=int, default=3,
                               help="sends again per answer before giving up (default 3)")
         transfer.set_defaults(func=_transfer)
+    fly.set_defaults(func=_act)
 
 
 LINK_FLAGS = {"mavlink": "link.link.url", "sysid": "link.link.source_system", "compid": "link.link.source_component",
@@ -97,6 +101,7 @@ def _act(args: argparse.Namespace) -> int:
     from layerpilot.cli.nodes import mission_from_args
     from layerpilot.mission.build import geofence_for
 
+    plan = _plan_to_fly(args) if args.link_command == "fly-plan" else None  # a bad file: before connecting
     mission = mission_from_args(args, LINK_FLAGS)
     config = link_settings(args, mission, args.vehicle or mission.vehicles[0]).link
     bound = {} if args.timeout is None else {"timeout": args.timeout}
@@ -110,23 +115,32 @@ def _act(args: argparse.Namespace) -> int:
     logger.addHandler(quiet)
     logger.propagate = False
     try:
-        return _fly(args, action, config, bound, geofence_for(mission))
+        return _fly(args, action, config, bound, geofence_for(mission), plan)
     finally:
         logger.removeHandler(quiet)
         logger.propagate = True
 
 
-def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence) -> int:
+def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence, plan=None) -> int:
     import math
     import sys
 
     from layerpilot.link.link import FlightLink, LinkError
+    from layerpilot.link.mission_transfer import MissionTransferError
 
+    if plan is not None:
+        try:
+            _upload_for_auto(args, config, plan)
+        except MissionTransferError as exc:
+            print(f"layerpilot link {action}: error: {exc}", file=sys.stderr, flush=True)
+            return 1
     with FlightLink(config, on_event=lambda text: print(f"link: {text}", flush=True), geofence=geofence) as link:
         try:
             link.connect()
             link.wait_ready()
-            if action == "takeoff":
+            if plan is not None:
+                _fly_mission(link, plan, bound)
+            elif action == "takeoff":
                 link.start_guided()
                 link.arm()
                 link.takeoff(args.alt, **bound)
@@ -154,6 +168,72 @@ def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence) -
     return 0
 
 
+def _plan_to_fly(args: argparse.Namespace):
+    """The plan for ``fly-plan``; ValueError (exit 2) for a bad file, an empty plan or bad flags."""
+    from layerpilot.link.qgc_plan import read_plan
+
+    if not args.item_timeout > 0 or args.retries < 0:
+        raise ValueError(f"--item-timeout must be > 0 and --retries >= 0, got {args.item_timeout}, {args.retries}")
+    plan = read_plan(args.plan)
+    if not plan.items:
+        raise ValueError(f"{args.plan}: the plan has no mission items to fly")
+    return plan
+
+
+def _upload_for_auto(args: argparse.Namespace, config, plan) -> None:
+    """Upload ``plan`` over a connection of its own (closed before the flight link opens the URL); only to
+    ArduPilot, whose AUTO the flight uses. MissionTransferError when the vehicle does not answer or refuses."""
+    from layerpilot.link.connection import open_connection
+    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission
+    from layerpilot.link.qgc_plan import ARDUPILOT, mission_items
+
+    conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
+    try:
+        heartbeat = _autopilot_heartbeat(conn, config, config.connect_timeout_s if args.timeout is None
+                                         else args.timeout)
+        if heartbeat.autopilot != ARDUPILOT:
+            raise MissionTransferError("fly-plan flies a stored mission in ArduPilot's AUTO; this autopilot is not "
+                                       "ArduPilot (upload it with `layerpilot link upload` and fly it there)")
+        upload_mission(conn, mission_items(plan, ARDUPILOT), (heartbeat.get_srcSystem(), heartbeat.get_srcComponent()),
+                       timeout=args.item_timeout, retries=args.retries)
+    finally:
+        conn.close()
+    print(f"fly-plan: {len(plan.items)} mission items accepted by system {heartbeat.get_srcSystem()}", flush=True)
+
+
+def _fly_mission(link, plan, bound: dict) -> None:
+    """Take off in GUIDED to the first item's altitude when on the ground, then AUTO until the last item is
+    reached (ArduPilot numbers the plan's items from 1: item 0 is home). Without --timeout the flight may
+    take 60 s plus 3 s per metre of the plan's path from home."""
+    import numpy as np
+
+    from layerpilot.geodesy import LocalFrame
+    from layerpilot.link.mission_transfer import GLOBAL
+
+    frame = LocalFrame(*plan.home)
+    rel = np.array([item.alt - plan.home[2] if item.frame == GLOBAL else item.alt for item in plan.items])
+    x, y, _ = frame.from_geodetic([i.lat for i in plan.items], [i.lon for i in plan.items], 0.0)
+    path = np.vstack([[0.0, 0.0, 0.0], np.column_stack([x, y, rel])])
+    timeout = bound.get("timeout", 60.0 + 3.0 * float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()))
+    if not link.armed:
+        link.start_guided()
+        link.arm()
+        link.takeoff(float(rel[0]), **bound)
+    n = len(plan.items)
+    link.fly_mission(n, timeout, lambda kind, seq: print(
+        f"mission: {'flying to' if kind == 'current' else 'reached'} item {seq} of {n}", flush=True))
+
+
+def _autopilot_heartbeat(conn, config, wait: float):
+    from layerpilot.link.mission_transfer import MissionTransferError
+
+    heartbeat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=wait,
+                                condition="HEARTBEAT.autopilot != 8")  # 8: MAV_AUTOPILOT_INVALID (a GCS)
+    if heartbeat is None:
+        raise MissionTransferError(f"no autopilot HEARTBEAT on {config.url} within {wait:g} s")
+    return heartbeat
+
+
 def _transfer(args: argparse.Namespace) -> int:
     """Upload or download a .plan: exit 0 once done, 1 with one line on stderr when the vehicle did not answer
     or refused (2 for a bad flag or a bad file, from main)."""
@@ -174,10 +254,7 @@ def _transfer(args: argparse.Namespace) -> int:
     bounds = {"timeout": args.item_timeout, "retries": args.retries}
     conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
     try:
-        heartbeat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=wait,
-                                    condition="HEARTBEAT.autopilot != 8")  # 8: MAV_AUTOPILOT_INVALID (a GCS)
-        if heartbeat is None:
-            raise MissionTransferError(f"no autopilot HEARTBEAT on {config.url} within {wait:g} s")
+        heartbeat = _autopilot_heartbeat(conn, config, wait)
         target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
         if plan is not None:
             upload_mission(conn, mission_items(plan, heartbeat.autopilot), target, **bounds)

@@ -23,7 +23,10 @@ Failsafes:
   * a reboot of the autopilot (its uptime, time_boot_ms, going backwards) is reported as
     such, never as a takeover: the link lets go of the vehicle (``reboots`` counts them);
     a disarm while the link flies is reported after ``REBOOT_GRACE_S`` unless it was a reboot.
-Every wait (arrival, takeoff, readiness, the end action's acknowledgement) ends at once
+:meth:`FlightLink.fly_mission` hands the vehicle to its stored mission (ArduPilot AUTO) and
+follows MISSION_CURRENT and MISSION_ITEM_REACHED; AUTO is then the mode the link flies in,
+so another mode is a takeover as above.
+Every wait (arrival, takeoff, readiness, the mission, the end action's acknowledgement) ends at once
 with :class:`ControlLost` (``kind``: ``takeover``, ``disarmed`` or ``reboot``) when one
 of these happens while it runs.
 Every report goes to ``events`` (a list of strings), the ``on_event`` callback and
@@ -153,6 +156,9 @@ class FlightLink:
         self._texts: list[str] = []
         # control state
         self._in_control = False    # we put the vehicle in GUIDED/OFFBOARD and fly it
+        self._auto = False          # ... or in AUTO, flying its stored mission (fly_mission)
+        self._mission_current = -1  # the autopilot's MISSION_CURRENT.seq, and the items it reached
+        self._reached: list[int] = []
         self._paused = False        # the pilot took over
         self._setpoint: tuple[np.ndarray, float | None, tuple[float, float] | None, bool] | None = None
         self._stream_hold = False   # PX4: stream the current position (pre-arm, takeoff prep, pause)
@@ -364,6 +370,7 @@ class FlightLink:
         """Take control: GUIDED on ArduPilot; on PX4 stream setpoints for ``offboard_prestream_s`` then OFFBOARD."""
         self._require_link()
         guided = modes.GUIDED_MODE[self.flavour]
+        self._auto = False
         if self.flavour == modes.PX4:
             with self._cond:
                 self._stream_hold = True
@@ -464,6 +471,56 @@ class FlightLink:
         if speed is not None and not (math.isfinite(speed) and speed > 0.0):
             raise ValueError(f"speed: must be a positive number of m/s, got {speed}")
         self.command(mav.MAV_CMD_DO_CHANGE_SPEED, 1.0, -2.0 if speed is None else float(speed), -1.0)
+
+    def fly_mission(self, last: int, timeout: float,
+                    progress: Callable[[str, int], None] | None = None) -> None:
+        """Fly the vehicle's stored mission in AUTO until item ``last`` is reached (MISSION_ITEM_REACHED).
+
+        ArduPilot only, armed and flying (ArduCopter refuses AUTO on the ground without a takeoff item).
+        ``progress("current", seq)`` on each new MISSION_CURRENT item, ``progress("reached", seq)`` on
+        each MISSION_ITEM_REACHED. Raises :class:`ControlLost` at once on a takeover (any other mode),
+        a disarm or a reboot, and LinkError when ``last`` is not reached within ``timeout`` seconds.
+        The vehicle stays in AUTO afterwards (ArduCopter loiters at the mission's end).
+        """
+        self._require_link()
+        auto = modes.MISSION_MODE.get(self.flavour)
+        if auto is None:
+            raise LinkError(f"fly_mission: stored missions are flown in ArduPilot's AUTO only (this is {self.flavour})")
+        if not self._armed:
+            raise LinkError("fly_mission: the vehicle is not armed (take off first: ArduCopter refuses AUTO on "
+                            "the ground unless the mission starts with a takeoff)")
+        upsets = len(self.upsets)
+        with self._cond:
+            self._setpoint, self._stream_hold, self._abandoned = None, False, ""
+            self._in_control, self._paused, self._auto = True, False, True
+            self._mission_current, self._reached = -1, []
+        self._command_long(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_MISSION_CURRENT, 1e6)
+        try:
+            self.set_mode(auto)
+        except LinkError:
+            with self._cond:
+                self._in_control = self._auto = False
+            raise
+        deadline = time.monotonic() + timeout
+        told = (-1, 0)
+        while True:
+            self._check_interrupted("flying the mission")
+            self._check_upsets(upsets, "flying the mission")
+            with self._cond:
+                current, reached = self._mission_current, list(self._reached)
+            if progress is not None:  # in the vehicle's order: an item reached, then the next one current
+                for seq in reached[told[1]:]:
+                    progress("reached", seq)
+                if current != told[0] and current >= 0:
+                    progress("current", current)
+            told = (current, len(reached))
+            if last in reached:
+                return
+            if time.monotonic() >= deadline:
+                raise LinkError(f"mission: item {last} not reached within {timeout:.1f} s (flying item {current}, "
+                                f"reached {reached or 'none'})")
+            self._wait(lambda: (self._mission_current, len(self._reached)) != told or len(self.upsets) > upsets,
+                       deadline - time.monotonic())
 
     def land(self, wait: bool = True, timeout: float = 180.0) -> None:
         """Land where the vehicle is (NAV_LAND); with ``wait``, until it has disarmed."""
@@ -775,6 +832,10 @@ class FlightLink:
                 self._gps_fix = msg.fix_type
             elif kind == "HOME_POSITION":
                 self._home = np.array(ned_to_enu(msg.x, msg.y, msg.z))
+            elif kind == "MISSION_CURRENT":
+                self._mission_current = msg.seq
+            elif kind == "MISSION_ITEM_REACHED":
+                self._reached.append(msg.seq)
             elif kind == "COMMAND_ACK":
                 if msg.target_system in (0, self.config.source_system) and \
                         msg.target_component in (0, self.config.source_component):
@@ -809,7 +870,7 @@ class FlightLink:
             old, self._mode = self._mode, modes.mode_name(self.flavour, msg.custom_mode)
             restored = not self._link_ok
             self._link_ok = True
-            guided = modes.GUIDED_MODE[self.flavour]
+            guided = modes.MISSION_MODE[self.flavour] if self._auto else modes.GUIDED_MODE[self.flavour]
             if restored and self._lost_at:
                 reports += self._on_restored()
             if was_armed and not self._armed and self._in_control:

@@ -8,7 +8,7 @@ ARDUPILOT = "ardupilot"
 PX4 = "px4"
 
 # ArduCopter custom_mode numbers (the ones the simulator flies).
-COPTER_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9}
+COPTER_MODES = {"STABILIZE": 0, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9}
 _COPTER_ALL = {0: "STABILIZE", 1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL",
                7: "CIRCLE", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 21: "SMART_RTL"}
 
@@ -18,6 +18,7 @@ PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "TAKEOFF": (4, 2), "LOITER": (4
 
 GUIDED_MODE = {ARDUPILOT: "GUIDED", PX4: "OFFBOARD"}
 HOLD_MODE = {ARDUPILOT: "LOITER", PX4: "LOITER"}
+MISSION_MODE = {ARDUPILOT: "AUTO"}  # the mode that flies the stored mission (PX4's AUTO.MISSION: not flown)
 
 
 def px4_custom_mode(main: int, sub: int) -> int:

@@ -41,6 +41,7 @@ from layerpilot.geodesy import LocalFrame
 from layerpilot.link import modes
 from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_ned, ned_to_enu, yaw_enu_to_ned,
                                     yaw_ned_to_enu)
+from layerpilot.sim.auto_mission import AutoMission
 from layerpilot.sim.battery import Battery, BatteryConfig
 from layerpilot.sim.mission_store import MESSAGES as MISSION_MESSAGES
 from layerpilot.sim.mission_store import MissionStore
@@ -71,6 +72,7 @@ DEFAULT_INTERVALS = {
     mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT: 1.0,   # ArduPilot only (its EXTRA3 stream); PX4 has none
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,      # ArduPilot's EXTRA3 stream
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,         # uptime (time_boot_ms); no GPS clock (0)
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,     # ArduPilot's EXTENDED_STATUS stream (and at once on a new item)
 }
 
 # EKF_STATUS_REPORT flags, after ArduCopter's estimator: without GPS attitude, vertical velocity
@@ -183,6 +185,7 @@ class MavlinkVehicle:
         self._setpoint_times: list[float] = []
         self.messages_received = 0
         self.mission = MissionStore(self._mav)  # the mission protocol's vehicle side (upload, download)
+        self._auto: AutoMission | None = None    # the stored mission's run in AUTO (ArduPilot flavour)
 
     # --- public API ------------------------------------------------------------------
     @property
@@ -222,6 +225,7 @@ class MavlinkVehicle:
             v.hold()
             self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
             self._velocity_deadline, self._setpoint_times = None, []
+            self._auto = None  # a mission flown after the boot starts again at item 1
             self._intervals = dict(DEFAULT_INTERVALS)
             self._next_send = {msg_id: self.time for msg_id in self._intervals}
 
@@ -369,7 +373,7 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_CRITICAL, "PreArm: Need Position Estimate" if self.flavour == modes.ARDUPILOT
                        else "Preflight Fail: No valid position estimate")
             return self._refused
-        if self.mode in ("RTL", "LAND", "TAKEOFF"):
+        if self.mode in ("RTL", "LAND", "TAKEOFF", "AUTO"):  # AUTO: ArduCopter's default AUTO_OPTIONS 0
             self._text(mav.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable" if self.flavour == modes.ARDUPILOT
                        else f"Arming denied: not in {self.mode}")
             return self._refused
@@ -416,10 +420,11 @@ class MavlinkVehicle:
             return self._refused
         if name == self.mode:
             return mav.MAV_RESULT_ACCEPTED
+        if name == "AUTO" and (refusal := self._start_auto()) is not None:
+            return refusal
         self.mode = name
         self._velocity_deadline = None
-        if name == "RTL":
-            self._rtl_phase = "climb"
+        self._rtl_phase = "climb" if name == "RTL" else ""
         if self.armed and name in ("GUIDED", "LOITER", "STABILIZE", "POSCTL", "OFFBOARD", "RTL", "LAND"):
             self.vehicle.hold()
         return mav.MAV_RESULT_ACCEPTED
@@ -554,6 +559,35 @@ class MavlinkVehicle:
             self._update_rtl()
         elif self.mode == "LAND" and self._airborne:
             self._descend()
+        elif self.mode == "AUTO":
+            self._update_auto()
+
+    def _start_auto(self) -> int | None:
+        """ArduCopter's checks on entering AUTO; None when the mission starts (or resumes), else the refusal."""
+        items = self.mission.items
+        if len(items) <= 1:  # item 0 is home
+            self._text(mav.MAV_SEVERITY_WARNING, "Mode change to AUTO failed: init failed")
+            return self._refused
+        if self.armed and not self._airborne and items[1].command != mav.MAV_CMD_NAV_TAKEOFF:
+            self._text(mav.MAV_SEVERITY_CRITICAL, "Auto: Missing Takeoff Cmd")
+            return self._refused
+        if self._auto is None or self._auto.complete or self._auto.items is not items:
+            self._auto = AutoMission(self._mav, items, self.config.origin, self.home)
+        if self.armed:
+            self._auto.resume(self.vehicle)
+        return None
+
+    def _update_auto(self) -> None:
+        """Fly the mission; its LAND and RTL items use the endpoint's landing and return."""
+        v = self.vehicle
+        if not self._rtl_phase:
+            action = self._auto.step(v, self.time)
+            if action:
+                self._rtl_phase = "climb" if action == "rtl" else "land"
+            target = v.position_target
+            self._airborne = self._airborne or (target is not None and target[2] > v.ground_z + 0.2)
+        if self._rtl_phase and self._airborne:
+            self._update_rtl()
 
     def _update_rtl(self) -> None:
         v, home = self.vehicle, self.home
@@ -617,7 +651,7 @@ class MavlinkVehicle:
 
     def _send_heartbeat(self) -> None:
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
-        if self.mode in ("GUIDED", "OFFBOARD", "RTL", "LAND", "LOITER", "TAKEOFF"):
+        if self.mode in ("GUIDED", "OFFBOARD", "RTL", "LAND", "LOITER", "TAKEOFF", "AUTO"):
             base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
         if self.armed:
             base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
@@ -641,6 +675,16 @@ class MavlinkVehicle:
         cells = [min(int(b.voltage * 1000), 65534)] + [65535] * 9
         self._mav.battery_status_send(0, mav.MAV_BATTERY_FUNCTION_UNKNOWN, mav.MAV_BATTERY_TYPE_LIPO, 32767, cells,
                                       int(b.current_a * 100), int(b.consumed_mah), -1, int(round(100 * b.remaining)))
+
+    def _send_mission_current(self) -> None:
+        """As ArduPilot: the item flown and the mission's state; before any run item 0, NOT_STARTED
+        (NO_MISSION without items); the total leaves out ArduPilot's home item."""
+        if self._auto is not None and self._auto.items is self.mission.items:
+            self._auto.send_current(self.mode == "AUTO")
+            return
+        total = max(len(self.mission.items) - (self.flavour == modes.ARDUPILOT), 0)
+        self._mav.mission_current_send(0, total, mav.MISSION_STATE_NOT_STARTED if total else
+                                       mav.MISSION_STATE_NO_MISSION, 0)
 
     def _send_system_time(self) -> None:
         self._mav.system_time_send(0, self._boot_ms())

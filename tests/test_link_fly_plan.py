@@ -1,0 +1,130 @@
+"""`layerpilot link fly-plan`: a .plan uploaded over real MAVLink (TCP loopback) to the simulated ArduCopter and
+flown in AUTO; a second client watches what the vehicle says (MISSION_CURRENT, MISSION_ITEM_REACHED and its
+GLOBAL_POSITION_INT, read through geodesy.LocalFrame)."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from layerpilot.cli import main
+from layerpilot.link.connection import open_connection
+from layerpilot.link.mission_transfer import MissionItem
+from layerpilot.link.qgc_plan import Plan, plan_from_waypoints, read_plan, write_plan
+from layerpilot.sim.mavlink_vehicle import SITL_DATUM, EndpointConfig, MavlinkVehicle
+from layerpilot.sim.vehicle import Multicopter
+
+WAYPOINTS = np.array([[12.0, 0.0, 8.0], [12.0, 15.0, 8.0], [-6.0, 15.0, 11.0]])  # map frame, home on the ground at 0
+ACCEPTANCE_M = 2.0
+HOLD_S = 1.0
+
+
+class Watcher(threading.Thread):
+    """A second MAVLink client on the vehicle's TCP port, keeping every message; ``on_reached(seq, conn)``
+    is called for each MISSION_ITEM_REACHED."""
+
+    def __init__(self, url: str, on_reached=None) -> None:
+        super().__init__(daemon=True)
+        self.conn = open_connection(url, 254, 190)
+        self.messages: list = []
+        self.on_reached = on_reached
+        self.stop = threading.Event()
+        self.start()
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            msg = self.conn.recv_match(blocking=True, timeout=0.05)
+            if msg is None:
+                continue
+            self.messages.append(msg)
+            if msg.get_type() == "MISSION_ITEM_REACHED" and self.on_reached is not None:
+                self.on_reached(msg.seq, self.conn)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.join(timeout=2.0)
+        self.conn.close()
+
+    def of(self, kind: str) -> list:
+        return [m for m in self.messages if m.get_type() == kind]
+
+
+@pytest.fixture
+def plan_file(tmp_path):
+    plan = plan_from_waypoints(WAYPOINTS, SITL_DATUM, acceptance=ACCEPTANCE_M)
+    held = [MissionItem(i.lat, i.lon, i.alt, params=(HOLD_S, ACCEPTANCE_M, 0.0, math.nan)) for i in plan.items]
+    return write_plan(tmp_path / "three.plan", Plan(held, plan.home))
+
+
+@pytest.fixture
+def vehicle():
+    endpoint = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 0.0), ground_z=0.0), "tcp:127.0.0.1:0",
+                              EndpointConfig()).start(speed=10.0)
+    yield endpoint, f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
+    endpoint.stop()
+
+
+def test_the_vehicle_flies_the_plan_in_auto_and_reaches_each_waypoint_in_order(vehicle, plan_file, capsys):
+    endpoint, url = vehicle
+    watcher = Watcher(url)
+    try:
+        assert main(["link", "--mavlink", url, "--timeout", "60", "fly-plan", str(plan_file)]) == 0
+    finally:
+        watcher.close()
+    out = capsys.readouterr().out
+    assert "fly-plan: 3 mission items accepted by system 1" in out
+    assert out.index("mission: flying to item 1 of 3") < out.index("mission: reached item 1 of 3") \
+        < out.index("mission: flying to item 2 of 3") < out.index("mission: reached item 3 of 3") \
+        < out.index("fly-plan: done")
+    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1, 2, 3]  # ArduPilot's item 0 is home
+    current = [m.seq for m in watcher.of("MISSION_CURRENT")]
+    flown = [s for i, s in enumerate(current) if i == 0 or s != current[i - 1]]
+    assert flown[-3:] == [1, 2, 3]
+    last = watcher.of("MISSION_CURRENT")[-1]
+    assert (last.total, last.mission_state, last.mission_mode) == (3, mav.MISSION_STATE_COMPLETE, 1)
+    texts = [m.text for m in watcher.of("STATUSTEXT")]
+    assert [t for t in texts if t.startswith(("Mission:", "Reached"))] == [
+        "Mission: 1 WP", "Reached command #1", "Mission: 2 WP", "Reached command #2", "Mission: 3 WP",
+        "Reached command #3"]
+    # where the vehicle said it was when it reported each item reached: the plan's lat/lon through LocalFrame
+    lat, lon, alt = (np.array(v) for v in zip(*[(i.lat, i.lon, i.alt) for i in read_plan(plan_file).items]))
+    expected = np.column_stack(SITL_DATUM.from_geodetic(lat, lon, SITL_DATUM.alt + alt))  # home: on the datum
+    for seq in (1, 2, 3):
+        index = next(k for k, m in enumerate(watcher.messages)
+                     if m.get_type() == "MISSION_ITEM_REACHED" and m.seq == seq)
+        fix = next(m for m in reversed(watcher.messages[:index]) if m.get_type() == "GLOBAL_POSITION_INT")
+        here = np.array(SITL_DATUM.from_geodetic(fix.lat * 1e-7, fix.lon * 1e-7, fix.alt * 1e-3), float)
+        assert np.linalg.norm(here - expected[seq - 1]) <= ACCEPTANCE_M, (seq, here, expected[seq - 1])
+        assert np.allclose(expected[seq - 1], WAYPOINTS[seq - 1], atol=0.011)  # the plan is the map's waypoints
+    # the mission's end: ArduCopter stays in AUTO and loiters at the last waypoint
+    assert endpoint.mode == "AUTO" and endpoint.armed
+    assert np.linalg.norm(endpoint.pose().position - WAYPOINTS[-1]) <= ACCEPTANCE_M
+
+
+def test_a_pilot_taking_over_ends_the_flight_at_once_with_one_line(vehicle, plan_file, capsys):
+    endpoint, url = vehicle
+
+    def take_over(seq: int, conn) -> None:
+        if seq == 1:
+            conn.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                       5, 0, 0, 0, 0, 0)  # LOITER
+
+    watcher = Watcher(url, take_over)
+    try:
+        assert main(["link", "--mavlink", url, "--timeout", "60", "fly-plan", str(plan_file)]) == 1
+    finally:
+        watcher.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["layerpilot link fly-plan: error: flying the mission: pilot took over: mode LOITER; "
+                   "paused until AUTO is handed back"]
+    assert endpoint.mode == "LOITER" and [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1]
+
+
+def test_fly_plan_refuses_an_empty_plan_before_connecting(tmp_path, capsys):
+    empty = write_plan(tmp_path / "empty.plan", Plan([], (SITL_DATUM.lat, SITL_DATUM.lon, SITL_DATUM.alt)))
+    assert main(["link", "--mavlink", "tcp:127.0.0.1:5760", "fly-plan", str(empty)]) == 2
+    assert "the plan has no mission items to fly" in capsys.readouterr().err
