@@ -16,6 +16,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from layerpilot.decide.behavior import Behavior
 from layerpilot.grid import GridGeometry, GridWindow
 from layerpilot.map.columns import ColumnLayers
 
@@ -83,19 +84,8 @@ def _tick_times(tick: Callable[[], object], update: Callable[[], None], repeat: 
 
 
 def run_decide_bench(sizes: list[int], repeat: int = 30, behavior_name: str = "balanced") -> dict:
-    """Per grid size: one decision tick as the pilot runs it (layers on the maker's window, the
-    fringe's distances redone where the map changed, then the decision) beside one bare
-    whole-grid OpenCV distance transform.
-
-    Each timed tick follows an untimed camera footprint of map updates near the drone (what
-    changes between two real ticks); "static" ticks see no change. The behavior's area of
-    interest is widened to cover the grid (a survey of that size); r_i stays the behavior's.
-    Three untimed ticks first are checked against whole-grid decisions on the same maps.
-    """
-    import dataclasses
-
-    from layerpilot.decide import DecisionMaker, load_behavior
-    from layerpilot.layers import LayerContext, compute_layers
+    """Per grid size: ``time_ticks`` on a synthetic survey (see there) of that many cells a side."""
+    from layerpilot.decide import load_behavior
 
     for size in sizes:
         if size < 32:
@@ -103,48 +93,9 @@ def run_decide_bench(sizes: list[int], repeat: int = 30, behavior_name: str = "b
     if repeat < 1:
         raise ValueError(f"repeat: must be >= 1, got {repeat}")
     base = load_behavior(behavior_name)
-    names = base.layer_names
     results = {}
     for size in sizes:
-        behavior = dataclasses.replace(base, area=dataclasses.replace(base.area, radius=0.45 * size, center=(0.0, 0.0)))
-        cols = synthetic_columns(size)
-        rng = np.random.default_rng(size)
-        maker, whole = DecisionMaker(behavior), DecisionMaker(behavior)
-        clock = {"now": 600.0, "position": (3.0, -2.0, 50.0), "same": True}
-
-        def context() -> LayerContext:
-            return LayerContext(now=clock["now"], options=behavior.layers)
-
-        def update() -> None:
-            clock["now"] += 5.0
-            camera_update(cols, rng, clock["position"][:2], clock["now"])
-
-        def tick() -> object:
-            position, ctx = clock["position"], context()
-            layers = compute_layers(cols, ctx, names, window=maker.window(cols.geometry, position))
-            decision = maker.decide(layers, position, clock["now"],
-                                    widen=lambda w: compute_layers(cols, ctx, names, window=w))
-            clock["position"] = decision.waypoint
-            return decision
-
-        for _ in range(3):  # untimed: the windowed ticks choose what whole-grid ticks choose
-            update()
-            position, ctx = clock["position"], context()
-            want = whole.decide(compute_layers(cols, ctx, names), position, clock["now"])
-            clock["same"] &= tick() == want
-        row: dict = {}
-        row["total_ms"], row["total_p90_ms"] = _tick_times(tick, update, repeat)
-        row["static_total_ms"] = _tick_times(tick, lambda: None, repeat)[0]
-        window = maker.window(cols.geometry, clock["position"])
-        row["window_cells"] = list(window.shape)
-        for name in names:
-            row[f"layer_{name}_ms"] = _tick_times(lambda: compute_layers(cols, context(), [name], window=window),
-                                                  update, repeat)[0]
-        row["same_decision"] = bool(clock["same"])
-        mask = cols.observed.view(np.uint8)
-        row["reference_distance_transform_ms"] = _time(
-            lambda: cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE), repeat)[0]
-        row["ratio_to_reference"] = row["total_ms"] / row["reference_distance_transform_ms"]
+        row = time_ticks(synthetic_columns(size), base, repeat, seed=size)
         if size in TARGETS_MS:
             row["target_ms"] = TARGETS_MS[size]
             row["meets_target"] = row["total_ms"] < TARGETS_MS[size]
@@ -153,7 +104,7 @@ def run_decide_bench(sizes: list[int], repeat: int = 30, behavior_name: str = "b
         "bench": "decide",
         "behavior": base.name,
         "r_i": base.r_i,
-        "layers": names,
+        "layers": base.layer_names,
         "repeat": repeat,
         "sizes": results,
         "meets_targets": all(r.get("meets_target", True) for r in results.values()),
@@ -161,6 +112,67 @@ def run_decide_bench(sizes: list[int], repeat: int = 30, behavior_name: str = "b
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, "
                    f"numpy {np.__version__}, opencv {cv2.__version__}, {cv2.getNumThreads()} cv threads",
     }
+
+
+def time_ticks(cols: ColumnLayers, base: Behavior, repeat: int, seed: int = 0) -> dict:
+    """One decision tick as the pilot runs it (layers on the maker's window, the fringe's
+    distances redone where the map changed, then the decision) beside one bare whole-grid
+    OpenCV distance transform.
+
+    Each timed tick follows an untimed camera footprint of map updates near the drone (what
+    changes between two real ticks; ``cols`` is changed in place); "static" ticks see no
+    change. The behavior's area of interest is widened to cover the grid (a survey of that
+    size); r_i stays the behavior's. Three untimed ticks first are checked against
+    whole-grid decisions on the same maps.
+    """
+    import dataclasses
+
+    from layerpilot.decide import DecisionMaker
+    from layerpilot.layers import LayerContext, compute_layers
+
+    g = cols.geometry
+    centre = g.cell_center(g.height // 2, g.width // 2)
+    area = dataclasses.replace(base.area, radius=0.45 * min(g.width, g.height) * g.resolution, center=centre)
+    behavior = dataclasses.replace(base, area=area)
+    names = behavior.layer_names
+    rng = np.random.default_rng(seed)
+    maker, whole = DecisionMaker(behavior, centre), DecisionMaker(behavior, centre)
+    clock = {"now": 600.0, "position": (centre[0] + 3.0, centre[1] - 2.0, 50.0), "same": True}
+
+    def context() -> LayerContext:
+        return LayerContext(now=clock["now"], options=behavior.layers)
+
+    def update() -> None:
+        clock["now"] += 5.0
+        camera_update(cols, rng, clock["position"][:2], clock["now"])
+
+    def tick() -> object:
+        position, ctx = clock["position"], context()
+        layers = compute_layers(cols, ctx, names, window=maker.window(g, position))
+        decision = maker.decide(layers, position, clock["now"],
+                                widen=lambda w: compute_layers(cols, ctx, names, window=w))
+        clock["position"] = decision.waypoint
+        return decision
+
+    for _ in range(3):  # untimed: the windowed ticks choose what whole-grid ticks choose
+        update()
+        position, ctx = clock["position"], context()
+        want = whole.decide(compute_layers(cols, ctx, names), position, clock["now"])
+        clock["same"] &= tick() == want
+    row: dict = {}
+    row["total_ms"], row["total_p90_ms"] = _tick_times(tick, update, repeat)
+    row["static_total_ms"] = _tick_times(tick, lambda: None, repeat)[0]
+    window = maker.window(g, clock["position"])
+    row["window_cells"] = list(window.shape)
+    for name in names:
+        row[f"layer_{name}_ms"] = _tick_times(lambda: compute_layers(cols, context(), [name], window=window),
+                                              update, repeat)[0]
+    row["same_decision"] = bool(clock["same"])
+    mask = np.ascontiguousarray(cols.observed).view(np.uint8)
+    row["reference_distance_transform_ms"] = _time(
+        lambda: cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE), repeat)[0]
+    row["ratio_to_reference"] = row["total_ms"] / row["reference_distance_transform_ms"]
+    return row
 
 
 def print_decide_bench(result: dict) -> None:

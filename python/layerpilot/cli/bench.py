@@ -1,4 +1,4 @@
-"""`layerpilot bench map|decide|view|depth|sim|bus`: every speed claim against its reference (layerpilot.bench)."""
+"""`layerpilot bench map|decide|view|depth|sim|bus|scale`: every speed claim against its reference (layerpilot.bench)."""
 
 from __future__ import annotations
 
@@ -40,6 +40,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--frames", type=int, default=40)
     b.add_argument("--seed", type=int, default=0)
     b.set_defaults(func=_sim)
+
+    b = benches.add_parser("scale", help="insertion, memory, layer query and decision as the survey area grows")
+    b.add_argument("--sides", type=float, nargs="+", default=[100.0, 250.0, 500.0, 1000.0], help="area sides in m")
+    b.add_argument("--repeat", type=int, default=15)
+    b.add_argument("--seed", type=int, default=0)
+    b.set_defaults(func=_scale)
 
     b = benches.add_parser("bus", help="map server on loopback: layer-query round trip, cloud throughput")
     b.add_argument("--seconds", type=float, default=5.0, help="seconds of clouds to send")
@@ -83,6 +89,14 @@ def _sim(args: argparse.Namespace) -> int:
     from layerpilot.bench.sim import main
 
     return main(args.frames, args.seed)
+
+
+def _scale(args: argparse.Namespace) -> None:
+    from layerpilot.bench.scale import print_scale_bench, run_scale_bench
+
+    if args.repeat < 1:
+        raise ValueError(f"--repeat must be >= 1, got {args.repeat}")
+    print_scale_bench(run_scale_bench(args.sides, args.repeat, args.seed))
 
 
 def _bus(args: argparse.Namespace) -> int:
