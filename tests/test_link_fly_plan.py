@@ -128,3 +128,14 @@ def test_fly_plan_refuses_an_empty_plan_before_connecting(tmp_path, capsys):
     empty = write_plan(tmp_path / "empty.plan", Plan([], (SITL_DATUM.lat, SITL_DATUM.lon, SITL_DATUM.alt)))
     assert main(["link", "--mavlink", "tcp:127.0.0.1:5760", "fly-plan", str(empty)]) == 2
     assert "the plan has no mission items to fly" in capsys.readouterr().err
+
+
+def test_a_waypoint_outside_the_geofence_is_refused_before_anything_is_uploaded(vehicle, tmp_path, capsys):
+    endpoint, url = vehicle
+    far = plan_from_waypoints(np.array([[12.0, 0.0, 8.0], [300.0, 0.0, 8.0]]), SITL_DATUM)  # fence: 100 m + 20 m
+    path = write_plan(tmp_path / "far.plan", far)
+    assert main(["link", "--mavlink", url, "--timeout", "20", "fly-plan", str(path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("layerpilot link fly-plan: error: item 2 of the plan: ")
+    assert "180.0 m outside the geofence" in err[0] and err[0].endswith("(nothing uploaded)")
+    assert endpoint.mission.items == [] and not endpoint.armed

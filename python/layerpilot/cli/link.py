@@ -130,7 +130,7 @@ def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence, p
 
     if plan is not None:
         try:
-            _upload_for_auto(args, config, plan)
+            _upload_for_auto(args, config, plan, geofence)
         except MissionTransferError as exc:
             print(f"layerpilot link {action}: error: {exc}", file=sys.stderr, flush=True)
             return 1
@@ -180,22 +180,30 @@ def _plan_to_fly(args: argparse.Namespace):
     return plan
 
 
-def _upload_for_auto(args: argparse.Namespace, config, plan) -> None:
+def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
     """Upload ``plan`` over a connection of its own (closed before the flight link opens the URL); only to
-    ArduPilot, whose AUTO the flight uses. MissionTransferError when the vehicle does not answer or refuses."""
+    ArduPilot, whose AUTO the flight uses, and only when every item lies inside the geofence (placed in the
+    vehicle's frame). MissionTransferError when the vehicle does not answer or refuses, or an item is outside."""
     from layerpilot.link.connection import open_connection
-    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission
+    from layerpilot.link.geofence import OutsideGeofence
+    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission, vehicle_frame
     from layerpilot.link.qgc_plan import ARDUPILOT, mission_items
 
+    wait = config.connect_timeout_s if args.timeout is None else args.timeout
     conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
     try:
-        heartbeat = _autopilot_heartbeat(conn, config, config.connect_timeout_s if args.timeout is None
-                                         else args.timeout)
+        heartbeat = _autopilot_heartbeat(conn, config, wait)
         if heartbeat.autopilot != ARDUPILOT:
             raise MissionTransferError("fly-plan flies a stored mission in ArduPilot's AUTO; this autopilot is not "
                                        "ArduPilot (upload it with `layerpilot link upload` and fly it there)")
-        upload_mission(conn, mission_items(plan, ARDUPILOT), (heartbeat.get_srcSystem(), heartbeat.get_srcComponent()),
-                       timeout=args.item_timeout, retries=args.retries)
+        target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
+        frame, home_z = vehicle_frame(conn, target, wait)
+        for i, item in enumerate(plan.items, 1):
+            try:
+                geofence.check(*item.place(frame, home_z), home_z)
+            except OutsideGeofence as exc:
+                raise MissionTransferError(f"item {i} of the plan: {exc} (nothing uploaded)") from None
+        upload_mission(conn, mission_items(plan, ARDUPILOT), target, timeout=args.item_timeout, retries=args.retries)
     finally:
         conn.close()
     print(f"fly-plan: {len(plan.items)} mission items accepted by system {heartbeat.get_srcSystem()}", flush=True)

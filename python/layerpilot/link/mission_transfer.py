@@ -20,11 +20,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from layerpilot.geodesy import LocalFrame
 
 NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT  # 16
 GLOBAL_RELATIVE_ALT = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT  # 3: altitude above home
 GLOBAL = mav.MAV_FRAME_GLOBAL  # 0: altitude above mean sea level (ArduPilot's home item)
+RELATIVE_FRAMES = (GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 
 
 class MissionTransferError(RuntimeError):
@@ -58,6 +62,13 @@ class MissionItem:
         mavlink.mission_item_int_send(*target, seq, self.frame, self.command, 0, int(self.autocontinue),
                                       *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)),
                                       float(self.alt), mav.MAV_MISSION_TYPE_MISSION)
+
+    def place(self, frame: LocalFrame, home_z: float) -> np.ndarray:
+        """The item's point in the map frame ``frame`` (x, y, z metres); ``home_z``: home's z there, which
+        the altitude is relative to in the GLOBAL_RELATIVE_ALT frames (GLOBAL: above mean sea level)."""
+        x, y, _ = frame.from_geodetic(self.lat, self.lon, 0.0)
+        z = home_z + self.alt if self.frame in RELATIVE_FRAMES else self.alt - frame.alt
+        return np.array([float(x), float(y), float(z)])
 
     @classmethod
     def from_message(cls, msg) -> "MissionItem":
@@ -109,6 +120,31 @@ def upload_mission(conn, items: Sequence[MissionItem], target: tuple[int, int], 
         if progress is not None:
             progress(len(asked), n)
         awaiting = f"MISSION_REQUEST_INT for item {seq + 1}" if seq + 1 < n else "MISSION_ACK"
+
+
+def vehicle_frame(conn, target: tuple[int, int], timeout: float) -> tuple[LocalFrame, float]:
+    """The autopilot's local frame on the Earth: a :class:`LocalFrame` at its EKF origin (GPS_GLOBAL_ORIGIN,
+    where the flight link's map frame starts) and home's z in it (HOME_POSITION), each asked for with
+    REQUEST_MESSAGE once a second until both came, at most ``timeout`` seconds."""
+    wanted = {"GPS_GLOBAL_ORIGIN": mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
+              "HOME_POSITION": mav.MAVLINK_MSG_ID_HOME_POSITION}
+    got: dict[str, object] = {}
+    deadline = time.monotonic() + timeout
+    while len(got) < len(wanted):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            missing = " and ".join(k for k in wanted if k not in got)
+            raise MissionTransferError(f"no {missing} from system {target[0]} within {timeout:g} s (needed to "
+                                       "place the mission in the vehicle's frame)")
+        for name, msg_id in wanted.items():
+            if name not in got:
+                conn.mav.command_long_send(*target, mav.MAV_CMD_REQUEST_MESSAGE, 0, msg_id, 0, 0, 0, 0, 0, 0)
+        msg = _receive(conn, tuple(k for k in wanted if k not in got), target, min(1.0, left))
+        if msg is not None:
+            got[msg.get_type()] = msg
+    origin, home = got["GPS_GLOBAL_ORIGIN"], got["HOME_POSITION"]
+    frame = LocalFrame(origin.latitude * 1e-7, origin.longitude * 1e-7, origin.altitude * 1e-3)
+    return frame, (home.altitude - origin.altitude) * 1e-3
 
 
 def download_mission(conn, target: tuple[int, int], *, timeout: float = 1.5, retries: int = 3) -> list[MissionItem]:

@@ -31,7 +31,6 @@ WPNAV_RADIUS_M = 2.0         # ArduCopter's default waypoint radius
 TAKEOFF_REACHED_M = 0.3      # a takeoff is complete this close to its altitude
 STOPPED_M_S = 0.3            # a waypoint the vehicle stops at is reached once it is this slow
 LOOK_AT_MIN_DISTANCE_M = 2.0  # WP_YAW_BEHAVIOR 2: face the waypoint while farther than this
-RELATIVE_FRAMES = (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 _NAMES = {mav.MAV_CMD_NAV_WAYPOINT: "WP", mav.MAV_CMD_NAV_TAKEOFF: "Takeoff", mav.MAV_CMD_NAV_LAND: "Land",
           mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: "RTL"}
 
@@ -57,13 +56,11 @@ class AutoMission:
         return mav.MISSION_STATE_COMPLETE if self.complete else mav.MISSION_STATE_ACTIVE
 
     def place(self, item: MissionItem, here: np.ndarray) -> np.ndarray:
-        """The map-frame point of ``item``; lat and lon 0 mean ``here``'s x, y."""
+        """The map-frame point of ``item``; lat and lon 0 mean ``here``'s x, y (ArduPilot's rule)."""
+        point = item.place(self._frame, float(self._home[2]))
         if item.lat == 0.0 and item.lon == 0.0:
-            x, y = here[0], here[1]
-        else:
-            x, y, _ = self._frame.from_geodetic(item.lat, item.lon, 0.0)
-        z = self._home[2] + item.alt if item.frame in RELATIVE_FRAMES else item.alt - self._frame.alt
-        return np.array([float(x), float(y), float(z)])
+            point[:2] = here[:2]
+        return point
 
     def resume(self, vehicle: Multicopter) -> None:
         """(Re)start the current item: AUTO entered, or the next item."""
