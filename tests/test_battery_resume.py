@@ -8,45 +8,39 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
-import threading
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from conftest import wait_for
+from test_link_flight import FAST, url_of
+from test_link_reboot import flying_link_node
 from layerpilot.bus.keys import Keys
+from layerpilot.cli import main as cli_main
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
 from layerpilot.bus.messages import MissionState, encode_mission_state
-from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
+from layerpilot.bus.session import publish
 from layerpilot.eval.mission import run_mission
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
-from layerpilot.link.geofence import Geofence
+from layerpilot.link.link import FlightLink
 from layerpilot.map import VoxelMap
 from layerpilot.mission import resume as survey
 from layerpilot.mission.build import build_pilot
-from layerpilot.mission.config import LinkSettings, Override, load_mission
+from layerpilot.mission.config import Override, load_mission
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
 from layerpilot.mission.pilot import Pilot, PilotConfig, load_pilot_behavior
-from layerpilot.nodes.link import LinkNode
+from layerpilot.nodes.up import up
 from layerpilot.sim.battery import BatteryConfig
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
-
-FAST = dict(arrival_hold_s=0.3, arrival_tolerance_m=0.5, command_timeout_s=1.0, ready_timeout_s=10.0)
 
 
 def start_vehicle(battery: BatteryConfig, speed: float = 10.0) -> MavlinkVehicle:
     return MavlinkVehicle(Multicopter(position=(0.0, 0.0, 2.0), ground_z=2.0), "tcp:127.0.0.1:0",
                           EndpointConfig(battery=battery)).start(speed=speed)
-
-
-def url_of(endpoint: MavlinkVehicle) -> str:
-    return f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
 
 
 def test_the_simulated_battery_reports_as_arducopter_and_its_failsafe_rtls():
@@ -55,8 +49,6 @@ def test_the_simulated_battery_reports_as_arducopter_and_its_failsafe_rtls():
     vehicle = start_vehicle(BatteryConfig(capacity_mah=100.0, low_mah=50.0, idle_current_a=0.0))
     gcs = open_connection(url_of(vehicle), 255, 190)
     try:
-        from layerpilot.link.link import FlightLink
-
         with FlightLink(LinkConfig(url=url_of(vehicle), **FAST), clock=lambda: vehicle.time) as link:
             link.connect(5.0)
             link.wait_ready()
@@ -181,33 +173,22 @@ def test_resume_keeps_the_schedule_phase_and_refuses_what_it_cannot_use(tmp_path
 
 def test_up_resume_without_a_saved_survey_says_so(tmp_path):
     m = tmp_path / "m.toml"
-    m.write_text(f'[decide]\nstate = "{tmp_path / "state"}"\n[bus]\nsecurity = false\n')
-    done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "up", "--mission", str(m), "--resume",
-                           "--log-dir", str(tmp_path / "logs")], capture_output=True, text=True, timeout=60)
-    assert done.returncode != 0 and "--resume: no saved survey state for uav1 in decide.state" in done.stderr
-    assert not (tmp_path / "logs").exists()  # no node was started
+    m.write_text(f'[decide]\nstate = "{tmp_path / "state"}"\n')
+    with pytest.raises(ValueError, match="--resume: no saved survey state for uav1 in decide.state"):
+        up(str(m), resume=True, log_dir=tmp_path / "logs")
+    assert not (tmp_path / "logs").exists()  # nothing was started
+    assert cli_main(["up", "--mission", str(m), "--resume", "--log-dir", str(tmp_path / "logs")]) == 2
 
 
 def test_link_node_commands_rtl_when_the_pilot_turns_home_for_the_battery():
     vehicle = start_vehicle(BatteryConfig())
-    cfg = LinkSettings(link=LinkConfig(url=url_of(vehicle), **FAST), takeoff_altitude=15.0, end_action="loiter")
-    stop = threading.Event()
     try:
-        with open_session(BusConfig(endpoint=free_endpoint())) as session:
-            node = LinkNode(session, "uav1", cfg, Geofence.circle((0.0, 0.0), 200.0))
-            runner = threading.Thread(target=node.run, args=(stop,))
-            runner.start()
-            try:
-                wait_for(lambda: node.phase == "flying", "the take-off", timeout=30)
-                publish(session, Keys("uav1").state, encode_mission_state(MissionState(
-                    10.0, "uav1", RETURN_PHASE, 7, 6, 300.0, np.array([0.0, 0.0, 50.0]))))
-                wait_for(lambda: node.phase.startswith("returning home"), "the node to turn home", timeout=10)
-                assert node.phase == ("returning home for the battery: RTL acknowledged (COMMAND_ACK accepted, "
-                                      "mode RTL)") and vehicle.mode == "RTL"
-            finally:
-                stop.set()
-                runner.join(timeout=10)
-                node.stop()
+        with flying_link_node(vehicle, end_action="loiter") as (node, session):
+            publish(session, Keys("uav1").state, encode_mission_state(MissionState(
+                10.0, "uav1", RETURN_PHASE, 7, 6, 300.0, np.array([0.0, 0.0, 50.0]))))
+            wait_for(lambda: node.phase.startswith("returning home"), "the node to turn home", timeout=10)
+            assert node.phase == ("returning home for the battery: RTL acknowledged (COMMAND_ACK accepted, "
+                                  "mode RTL)") and vehicle.mode == "RTL"
         assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the return alone
     finally:
         vehicle.stop()

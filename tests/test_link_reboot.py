@@ -7,12 +7,14 @@ reboot as ``link.on_reboot`` says."""
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from conftest import wait_for
+from test_link_flight import FAST, link, url_of, vehicle  # noqa: F401 (fixtures)
 from layerpilot.cli import main as cli_main
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.messages import Waypoint, encode_waypoint
@@ -24,35 +26,27 @@ from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import ControlLost, FlightLink, LinkError
 from layerpilot.mission.config import LinkSettings, load_mission
 from layerpilot.nodes.link import LinkNode
-from layerpilot.sim.mavlink_vehicle import FORCE_DISARM_MAGIC, EndpointConfig, MavlinkVehicle
-from layerpilot.sim.vehicle import Multicopter
+from layerpilot.sim.mavlink_vehicle import FORCE_DISARM_MAGIC, MavlinkVehicle
 
-FAST = dict(arrival_hold_s=0.3, arrival_tolerance_m=0.5, command_timeout_s=1.0, ready_timeout_s=10.0)
 GUIDED, LOITER = 4, 5  # ArduCopter custom modes
 
 
-def start_vehicle() -> MavlinkVehicle:
-    return MavlinkVehicle(Multicopter(position=(0.0, 0.0, 2.0), ground_z=2.0), "tcp:127.0.0.1:0",
-                          EndpointConfig()).start(speed=10.0)
-
-
-def url_of(endpoint: MavlinkVehicle) -> str:
-    return f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
-
-
-@pytest.fixture
-def vehicle():
-    endpoint = start_vehicle()
-    yield endpoint
-    endpoint.stop()
-
-
-@pytest.fixture
-def link(vehicle):
-    with FlightLink(LinkConfig(url=url_of(vehicle), **FAST), clock=lambda: vehicle.time) as lk:
-        lk.connect(5.0)
-        lk.wait_ready()
-        yield lk
+@contextmanager
+def flying_link_node(vehicle: MavlinkVehicle, **settings):
+    """A link node on a real Zenoh session, flying ``vehicle`` (taken off to 15 m); yields (node, session)."""
+    cfg = LinkSettings(link=LinkConfig(url=url_of(vehicle), **FAST), takeoff_altitude=15.0, **settings)
+    stop = threading.Event()
+    with open_session(BusConfig(endpoint=free_endpoint())) as session:
+        node = LinkNode(session, "uav1", cfg, Geofence.circle((0.0, 0.0), 200.0))
+        runner = threading.Thread(target=node.run, args=(stop,))
+        runner.start()
+        try:
+            wait_for(lambda: node.phase == "flying", "the take-off", timeout=30)
+            yield node, session
+        finally:
+            stop.set()
+            runner.join(timeout=10)
+            node.stop()
 
 
 def ground_station(vehicle: MavlinkVehicle):
@@ -184,41 +178,30 @@ def test_on_reboot_is_a_checked_mission_key(tmp_path):
 
 @pytest.mark.parametrize("on_reboot", ["end", "pause"])
 def test_link_node_ends_or_pauses_the_flying_after_a_reboot(vehicle, on_reboot):
-    cfg = LinkSettings(link=LinkConfig(url=url_of(vehicle), **FAST), takeoff_altitude=15.0, on_reboot=on_reboot)
-    stop = threading.Event()
-    with open_session(BusConfig(endpoint=free_endpoint())) as session:
-        node = LinkNode(session, "uav1", cfg, Geofence.circle((0.0, 0.0), 200.0))
-        runner = threading.Thread(target=node.run, args=(stop,))
-        runner.start()
+    with flying_link_node(vehicle, on_reboot=on_reboot) as (node, session):
+        waypoint = Keys("uav1").waypoint
+        publish(session, waypoint, encode_waypoint(Waypoint(0.0, "uav1", 1, np.array([40.0, 0.0, 17.0]))))
+        wait_for(lambda: vehicle.pose().position[0] > 10.0, "the first waypoint")
+        vehicle.reboot()
+        wait_for(lambda: node.phase != "flying", "the node to see the reboot", timeout=5)
+        publish(session, waypoint, encode_waypoint(Waypoint(1.0, "uav1", 2, np.array([-30.0, 20.0, 17.0]))))
+        if on_reboot == "end":
+            assert node.phase == "ended: autopilot rebooted"
+            assert node.link.reboots == 1 and not any("took over" in e for e in node.link.events)
+            return
+        assert node.phase == ("paused: autopilot rebooted; waiting for a pilot to arm, take off and hand "
+                              "over GUIDED")
+        gcs = ground_station(vehicle)  # the pilot flies it up again and hands over GUIDED
         try:
-            wait_for(lambda: node.phase == "flying", "the take-off", timeout=30)
-            waypoint = Keys("uav1").waypoint
-            publish(session, waypoint, encode_waypoint(Waypoint(0.0, "uav1", 1, np.array([40.0, 0.0, 17.0]))))
-            wait_for(lambda: vehicle.pose().position[0] > 10.0, "the first waypoint")
-            vehicle.reboot()
-            wait_for(lambda: node.phase != "flying", "the node to see the reboot", timeout=5)
-            publish(session, waypoint, encode_waypoint(Waypoint(1.0, "uav1", 2, np.array([-30.0, 20.0, 17.0]))))
-            if on_reboot == "end":
-                assert node.phase == "ended: autopilot rebooted"
-                assert node.link.reboots == 1 and not any("took over" in e for e in node.link.events)
-                return
-            assert node.phase == ("paused: autopilot rebooted; waiting for a pilot to arm, take off and hand "
-                                  "over GUIDED")
-            gcs = ground_station(vehicle)  # the pilot flies it up again and hands over GUIDED
-            try:
-                wait_for(lambda: node.link.missing() == [], "the rebooted autopilot to be ready", timeout=10)
-                command(gcs, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
-                wait_for(lambda: vehicle.mode == "GUIDED", "GUIDED", timeout=5)
-                command(gcs, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-                wait_for(lambda: vehicle.armed, "armed", timeout=5)
-                command(gcs, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10.0)
-                wait_for(lambda: node.phase == "flying", "the node to fly again", timeout=20)
-            finally:
-                gcs.close()
-            # the waypoint heard while paused flies now
-            wait_for(lambda: np.linalg.norm(vehicle.pose().position[:2] - (-30.0, 20.0)) < 1.0,
-                     "the held waypoint", timeout=20)
+            wait_for(lambda: node.link.missing() == [], "the rebooted autopilot to be ready", timeout=10)
+            command(gcs, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
+            wait_for(lambda: vehicle.mode == "GUIDED", "GUIDED", timeout=5)
+            command(gcs, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            wait_for(lambda: vehicle.armed, "armed", timeout=5)
+            command(gcs, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10.0)
+            wait_for(lambda: node.phase == "flying", "the node to fly again", timeout=20)
         finally:
-            stop.set()
-            runner.join(timeout=10)
-            node.stop()
+            gcs.close()
+        # the waypoint heard while paused flies now
+        wait_for(lambda: np.linalg.norm(vehicle.pose().position[:2] - (-30.0, 20.0)) < 1.0,
+                 "the held waypoint", timeout=20)

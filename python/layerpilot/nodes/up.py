@@ -176,13 +176,22 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
        duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
        operator_can_save: bool = False, resume: bool = False, record: str | Path | None = None) -> int:
     """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``);
-    ``record``: an MCAP file every bus message is written to (bus/recording.py)."""
+    ``record``: an MCAP file every bus message is written to (bus/recording.py); ``resume``: continue
+    the survey saved in ``decide.state`` after a battery swap (refused before anything starts if a
+    vehicle has none)."""
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
     from layerpilot.nodes.runner import bus_config
 
     path = resolve(mission)
     m = load_mission(path)  # refuse a bad file before anything starts
+    if resume:  # before anything starts: a survey to continue must exist
+        from layerpilot.mission.resume import state_file
+
+        missing = [v for v in m.vehicles if not m.decide.state or not state_file(m.decide.state, v).exists()]
+        if missing:
+            raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
+                             f"({m.decide.state!r})")
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -192,13 +201,6 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
         session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
-    if resume:  # before anything starts: a survey to continue must exist
-        from layerpilot.mission.resume import state_file
-
-        missing = [v for v in m.vehicles if not m.decide.state or not state_file(m.decide.state, v).exists()]
-        if missing:
-            raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
-                             f"({m.decide.state!r})")
     sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume), Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud
