@@ -19,9 +19,10 @@ from test_link_reboot import flying_link_node
 from layerpilot.bus.keys import Keys
 from layerpilot.cli import main as cli_main
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
-from layerpilot.bus.messages import MissionState, encode_mission_state
-from layerpilot.bus.session import publish
+from layerpilot.bus.messages import MissionState, State, decode_mission_state, encode_mission_state, encode_state
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
 from layerpilot.eval.mission import run_mission
+from layerpilot.geometry import Pose
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.link import FlightLink
@@ -32,6 +33,7 @@ from layerpilot.mission.config import Override, load_mission
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
 from layerpilot.mission.pilot import Pilot, PilotConfig, load_pilot_behavior
+from layerpilot.nodes.decide import DecideNode
 from layerpilot.nodes.up import up
 from layerpilot.sim.battery import BatteryConfig
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
@@ -192,3 +194,30 @@ def test_link_node_commands_rtl_when_the_pilot_turns_home_for_the_battery():
         assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the return alone
     finally:
         vehicle.stop()
+
+
+def test_decide_node_turns_home_on_the_charge_its_pose_carries_and_saves_the_survey(tmp_path):
+    """The live driver: poses with the link's charge reach the node's pilot, armed ones only (the ground
+    would dilute the drain: 70 % in 110 s); 70 % in 100 s is 0.7 %/s, and 150 s home (500 m at 5 m/s,
+    50 m down) need 105 % + the reserve: home at once."""
+    mission = load_mission("default", [Override("--state", "decide.state", str(tmp_path / "state"))])
+    ep = free_endpoint()
+    k = Keys("uav1")
+    heard: list[MissionState] = []
+    with open_session(BusConfig(endpoint=ep)) as node_session, open_session(BusConfig(endpoint=ep)) as world:
+        node = DecideNode(node_session, "uav1", mission)
+        sub = world.declare_subscriber(k.state, lambda s: heard.append(decode_mission_state(s.payload.to_bytes())))
+        node.start()
+        try:
+            for stamp, charge, armed in ((0.0, 1.0, False), (10.0, 1.0, True), (110.0, 0.3, True)):
+                pose = Pose.from_euler(0.0, 0.0, 0.0, np.array([300.0, 400.0, 50.0]))
+                publish(world, k.pose, encode_state(State(stamp, "uav1", pose, armed=armed, battery=charge)))
+                wait_for(lambda: node.pilot.energy._last is not None and node.pilot.energy._last[0] == stamp
+                         or not armed, "the pose to reach the pilot", timeout=10)
+            wait_for(lambda: any(s.phase == RETURN_PHASE for s in heard), "the battery return", timeout=10)
+        finally:
+            sub.undeclare()
+            node.stop()
+    assert np.allclose(heard[-1].target, (0.0, 0.0, 50.0)) and "home (drain 42.00 %/min)" in node.pilot.energy.why
+    saved = json.loads((tmp_path / "state" / "uav1.json").read_text())
+    assert saved["ending"] == "battery" and saved["seq"] == 1 and saved["flown_s"] == pytest.approx(110.0)

@@ -11,6 +11,7 @@ second, so a link that (re)starts later still gets it.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from pathlib import Path
@@ -159,8 +160,10 @@ class DecideNode:
         try:
             if self._first_stamp is None:
                 self._first_stamp = state.stamp
+            # the drain is measured in flight: a charge read on the ground, disarmed, would dilute it
+            charge = state.battery if state.armed else math.nan
             command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid, yield_to=yield_to,
-                                      battery=state.battery)
+                                      battery=charge)
         except INPUT_ERRORS as exc:  # e.g. the layer window misses the area of interest: wait for the next one
             self.rejects.reject(self.keys.layers, BadMessage(f"decision failed ({type(exc).__name__})", str(exc)))
             with self._cond:
