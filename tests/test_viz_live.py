@@ -62,7 +62,7 @@ snapshot_period = 1000.0
             browser = Chromium()
             browser.open(ready["url"])
             shot, green, yellow = b"", 0, 0
-            end = time.monotonic() + 60  # the viewer's WebAssembly compiles on a software GPU: seconds
+            end = time.monotonic() + 120  # the viewer's WebAssembly compiles on a software GPU: seconds
             while time.monotonic() < end and (green < 1000 or yellow < 200):
                 time.sleep(1.0)
                 shot = browser.screenshot()
