@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections import Counter
 
 from rerun.chunk import RrdReader
+
+from layerpilot.cli.eval import _run
+from layerpilot.mission.config import Override, load_mission
 
 ENTITIES = ["/world/map", "/world/drone", "/world/path", "/world/camera", "/world/target", "/world/runner_up",
             "/world/area", "/decision", "/layers/color", "/layers/elevation", "/layers/time_since_seen",
@@ -16,11 +20,13 @@ ENTITIES = ["/world/map", "/world/drone", "/world/path", "/world/camera", "/worl
 
 
 def test_demo_run_saves_an_rrd_with_the_mission_entities(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "layerpilot.cli", "demo", "--duration", "12", "--camera", "160x120",
-                           "--depth", "ground_truth", "--frame-rate", "2", "--out", str(tmp_path), "--name", "d"],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
+    """The demo command's own path (cli.eval._run): run_mission with a LockstepView saving beside the report."""
+    mission = load_mission("default", [Override("--duration", "evaluation.duration", 8.0),
+                                       Override("--camera", "sim.camera", {"width": 160, "height": 120}),
+                                       Override("--depth", "depth.source", "ground_truth")])
     run = tmp_path / "d"
+    with open(os.devnull, "w") as quiet:
+        _run(mission, run, progress_stream=quiet)
     rows: Counter[str] = Counter()
     for chunk in RrdReader(run / "mission.rrd").stream():
         rows[chunk.entity_path] += chunk.num_rows

@@ -59,7 +59,7 @@ snapshot_period = 1000.0
                          "--web-port", str(free_tcp_port()), "--grpc-port", str(free_tcp_port()),
                          "--save", str(tmp / "view.rrd")) as view:
             ready = json.loads(view.stdout.readline())
-            browser = Chromium()
+            browser = Chromium(960, 600)  # small: SwiftShader draws every pixel on the CPU
             browser.open(ready["url"])
             shot, green, yellow = b"", 0, 0
             end = time.monotonic() + 120  # the viewer's WebAssembly compiles on a software GPU: seconds

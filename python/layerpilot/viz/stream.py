@@ -6,6 +6,8 @@ the static viewer page (``web_port``), which connects to it; ``url`` is what a b
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
@@ -42,9 +44,12 @@ def open_stream(name: str, *, save: str | Path | None = None, web_port: int | No
         sinks.append(server)
         rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=server.uri)
         url = f"http://127.0.0.1:{web_port}/?url={quote(server.uri, safe='')}"
-    if spawn:
-        rr.spawn(connect=False)
-        sinks.append(rr.GrpcSink())
+    if spawn:  # the native viewer, listening on grpc_port
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise ValueError("the native viewer needs a display (DISPLAY and WAYLAND_DISPLAY are unset): "
+                             "use the web viewer (view --web, demo --view web)")
+        rr.spawn(port=grpc_port, connect=False)
+        sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{grpc_port}/proxy"))
     stream.set_sinks(*sinks, default_blueprint=layout())
     return ViewStream(stream, url)
 
