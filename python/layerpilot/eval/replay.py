@@ -51,7 +51,8 @@ def recorded_mission(reader: RecordingReader, fallback: str | Path | None = None
     for _ in reader.messages():  # the metadata is written first: stop at the first message
         break
     if not reader.mission_text:
-        raise ConfigError(f"{reader.path}: the recording holds no mission; give one with --config")
+        why = reader.damage or "no layerpilot mission in its metadata"
+        raise ConfigError(f"{reader.path}: the recording holds no mission ({why}); give one with --config")
     return from_dict(Mission, tomllib.loads(reader.mission_text), "mission")
 
 
