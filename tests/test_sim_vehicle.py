@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from layerpilot.geodesy import LocalFrame
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
+from layerpilot.link.mission_transfer import GLOBAL, MissionItem
 from layerpilot.link.relay import free_port
-from layerpilot.geodesy import LocalFrame
 from layerpilot.sim.mavlink_vehicle import SITL_DATUM, EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter, VehicleLimits
 
@@ -250,6 +251,34 @@ def test_guided_flight_with_type_masks_land_and_rtl(bench):
     assert not bench.endpoint.armed and bench.endpoint.mode == "RTL"
     assert np.allclose(bench.endpoint.pose().position, (0.0, 0.0, 4.0), atol=0.3)
     assert bench.last("HEARTBEAT").custom_mode == 6
+
+
+def test_auto_refuses_as_arducopter_then_takes_off_flies_and_lands_a_mission(bench):
+    """AUTO from the ground: refused without a mission and, armed, without a takeoff first; a mission of
+    takeoff, waypoint and land is flown item by item and ends disarmed on the ground at the landing point."""
+    def item(x: float, y: float, alt: float, command: int = mav.MAV_CMD_NAV_WAYPOINT, frame: int = 3):
+        lat, lon, _ = SITL_DATUM.to_geodetic(x, y, 0.0)
+        return MissionItem(float(lat), float(lon), alt, command, frame, (0.0, 0.0, 0.0, math.nan))
+
+    home = item(0.0, 0.0, SITL_DATUM.alt + 4.0, frame=GLOBAL)
+    bench.run(2.1)
+    assert bench.set_mode(3) == mav.MAV_RESULT_FAILED and "Mode change to AUTO failed: init failed" in bench.texts()
+    bench.endpoint.mission.items = [home, item(10.0, 5.0, 6.0)]
+    assert bench.set_mode(4) == mav.MAV_RESULT_ACCEPTED
+    assert bench.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
+    assert bench.set_mode(3) == mav.MAV_RESULT_FAILED and "Auto: Missing Takeoff Cmd" in bench.texts()
+    bench.endpoint.mission.items = [home, item(0.0, 0.0, 6.0, mav.MAV_CMD_NAV_TAKEOFF), item(10.0, 5.0, 6.0),
+                                    item(10.0, 5.0, 0.0, mav.MAV_CMD_NAV_LAND)]
+    assert bench.set_mode(3) == mav.MAV_RESULT_ACCEPTED
+    bench.run(4.0)
+    assert bench.endpoint.pose().position[2] == pytest.approx(10.0, abs=0.3)  # 6 m above home at z 4
+    bench.run(30.0)
+    assert not bench.endpoint.armed and bench.endpoint.mode == "AUTO"
+    assert np.allclose(bench.endpoint.pose().position, (10.0, 5.0, 4.0), atol=0.3)
+    assert [m.seq for m in bench.received if m.get_type() == "MISSION_ITEM_REACHED"] == [1, 2]
+    assert [t for t in bench.texts() if t.startswith(("Mission:", "Reached", "Land"))] == [
+        "Mission: 1 Takeoff", "Reached command #1", "Mission: 2 WP", "Reached command #2", "Mission: 3 Land",
+        "Land complete, disarming"]
 
 
 def test_px4_offboard_needs_a_setpoint_stream_and_falls_back():

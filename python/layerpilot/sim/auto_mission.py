@@ -69,6 +69,8 @@ class AutoMission:
         self._target = self.place(item, vehicle.position)
         if item.command == mav.MAV_CMD_NAV_TAKEOFF:
             self._target[:2] = vehicle.position[:2]
+        elif item.command == mav.MAV_CMD_NAV_LAND:
+            self._target[2] = vehicle.position[2]  # there at this height, then down
         if item.command in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LAND):
             vehicle.set_position_target(*self._target, yaw=self._yaw(item, vehicle))
         self._mav.statustext_send(mav.MAV_SEVERITY_INFO,
