@@ -196,7 +196,9 @@ def test_link_node_waits_for_a_position_then_flies_and_ends_with_rtl_on_sigterm(
         last = json.loads(out.strip().splitlines()[-1])
         assert last["status"] == "stopped", last
         assert last["end"] == "RTL acknowledged (COMMAND_ACK accepted, mode RTL)", last
-        assert endpoint.mode == "RTL" and endpoint.armed  # flying home, supervised by the autopilot
+        # Flying home, supervised by the autopilot; at 10x a loaded machine may see it already landed.
+        height = float(endpoint.vehicle.position[2] - endpoint.vehicle.ground_z)
+        assert endpoint.mode == "RTL" and (endpoint.armed or height < 0.5), (endpoint.armed, height)
         assert err.count("mission end: RTL acknowledged") == 1
     finally:
         endpoint.stop()
