@@ -57,8 +57,11 @@ snapshot_period = 1000.0
         wait_for(creds.exists, "the operator's credentials")
         with cli_process("view", "--config", str(mission), "--endpoint", ep, "--credentials", str(creds), "--web",
                          "--web-port", str(free_tcp_port()), "--grpc-port", str(free_tcp_port()),
-                         "--save", str(tmp / "view.rrd")) as view:
+                         "--save", str(tmp / "view.rrd")) as view, \
+                cli_process("record", str(tmp / "joined.mcap"), "--config", str(mission), "--endpoint", ep,
+                            "--credentials", str(creds)) as record:
             ready = json.loads(view.stdout.readline())
+            assert json.loads(record.stdout.readline())["status"] == "ready"
             browser = Chromium(960, 600)  # small: SwiftShader draws every pixel on the CPU
             browser.open(ready["url"])
             shot, green, yellow = b"", 0, 0
@@ -69,8 +72,10 @@ snapshot_period = 1000.0
                 green, yellow = scene_pixels(shot)
             title = browser.evaluate("document.title + ' ' + document.querySelectorAll('canvas').length")
             (tmp / "view.png").write_bytes(shot)
-            view.send_signal(2)  # Ctrl-C: the view finishes its .rrd
+            view.send_signal(2)  # Ctrl-C: the view finishes its .rrd, the recorder its file
+            record.send_signal(2)
             out, err = view.communicate(timeout=30)
+            joined = json.loads(record.communicate(timeout=30)[0].strip().splitlines()[-1])
         stopped = json.loads(out.strip().splitlines()[-1])
     finally:
         if browser is not None:
@@ -78,8 +83,7 @@ snapshot_period = 1000.0
         stop_up(up)
     recorded = next(json.loads(ln.split("recorded ", 1)[1]) for ln in lines if "layerpilot up: recorded" in ln)
     return {"dir": tmp, "title": title, "green": green, "yellow": yellow, "view": stopped, "recorded": recorded,
-            "view_log": err,
-            "mission": mission}
+            "view_log": err, "joined": joined}
 
 
 def test_web_viewer_shows_the_mission_in_a_real_browser(live):
@@ -109,6 +113,24 @@ def test_recording_is_read_back_by_the_mcap_library(live):
         assert schemas[f"layerpilot/uav1/{topic}"] == (name, "protobuf", "protobuf")
     assert dict(counts) == live["recorded"]["messages"]  # every message the recorder heard, none lost or doubled
     assert live["recorded"]["dropped"] == live["recorded"]["rejected"] == 0
+
+
+def test_record_joining_the_mission_holds_a_contiguous_part_of_it(live):
+    """`layerpilot record` joined after `up` started and stopped before it: per key, its messages are one
+    unbroken run of what `up --record` holds (nothing lost or reordered in between)."""
+    def by_key(path) -> dict[str, list[bytes]]:
+        out: dict[str, list[bytes]] = {}
+        with open(path, "rb") as f:
+            for _, channel, message in make_reader(f).iter_messages():
+                out.setdefault(channel.topic, []).append(message.data)
+        return out
+
+    full, joined = by_key(live["dir"] / "mission.mcap"), by_key(live["dir"] / "joined.mcap")
+    assert joined and {len(v) for v in joined.values()} != {0}
+    assert {k: len(v) for k, v in joined.items()} == live["joined"]["messages"]
+    for key in ("layerpilot/uav1/cloud", "layerpilot/uav1/decision", "layerpilot/uav1/layers"):  # lossless topics
+        part, whole = joined[key], full[key]  # (the empty map's first layer sets are equal bytes: try every start)
+        assert any(whole[i:i + len(part)] == part for i in range(len(whole) - len(part) + 1)), key
 
 
 def test_replay_map_only_gives_the_live_map_voxel_for_voxel(live):
