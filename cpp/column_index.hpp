@@ -2,6 +2,7 @@
 // window are a copy out of dense tiles instead of a walk over the octree.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <unordered_map>
@@ -37,9 +38,22 @@ class ColumnIndex {
     return tile->columns[cellIndex(x, y)];
   }
 
-  const Column* find(uint16_t x, uint16_t y) const {
-    auto it = tiles_.find(tileId(x, y));
-    return it == tiles_.end() ? nullptr : &it->second->columns[cellIndex(x, y)];
+  // f(x, y, column) for every column of the window [x0, x0 + width) x [y0, y0 + height) that
+  // shows something, one tile look-up per 8 x 8 columns.
+  template <class F>
+  void forEachShowing(int64_t x0, int64_t y0, int width, int height, F&& f) const {
+    const int64_t x_end = std::min<int64_t>(x0 + width, 0x10000), y_end = std::min<int64_t>(y0 + height, 0x10000);
+    const int64_t x_begin = std::max<int64_t>(x0, 0), y_begin = std::max<int64_t>(y0, 0);
+    for (int64_t ty = y_begin & ~int64_t(kTileSize - 1); ty < y_end; ty += kTileSize)
+      for (int64_t tx = x_begin & ~int64_t(kTileSize - 1); tx < x_end; tx += kTileSize) {
+        auto it = tiles_.find(tileId(static_cast<uint16_t>(tx), static_cast<uint16_t>(ty)));
+        if (it == tiles_.end()) continue;
+        for (int64_t y = std::max(ty, y_begin); y < std::min(ty + kTileSize, y_end); ++y)
+          for (int64_t x = std::max(tx, x_begin); x < std::min(tx + kTileSize, x_end); ++x) {
+            const Column& c = it->second->columns[cellIndex(static_cast<uint16_t>(x), static_cast<uint16_t>(y))];
+            if (c.occupied > 0) f(x, y, c);
+          }
+      }
   }
 
   // A voxel became occupied: returns true if it is now the column's top.

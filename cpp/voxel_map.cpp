@@ -379,24 +379,16 @@ ColumnWindow VoxelMap::columnLayers(int64_t key_x0, int64_t key_y0, int width, i
   w.min_distance.assign(cells, std::numeric_limits<float>::infinity());
   const double res = geometry_.getResolution();
   std::shared_lock lock(mutex_);
-  for (int row = 0; row < height; ++row) {
-    const int64_t ky = key_y0 + row;
-    if (ky < 0 || ky > 0xffff) continue;
-    for (int col = 0; col < width; ++col) {
-      const int64_t kx = key_x0 + col;
-      if (kx < 0 || kx > 0xffff) continue;
-      const Column* c = columns_.find(static_cast<uint16_t>(kx), static_cast<uint16_t>(ky));
-      if (!c || c->occupied == 0) continue;
-      const size_t i = size_t(row) * width + col;
-      w.observed[i] = 1;
-      w.elevation[i] = static_cast<float>(geometry_.keyToCoord(static_cast<uint16_t>(c->top)) + 0.5 * res);
-      w.color[3 * i] = c->color.r;
-      w.color[3 * i + 1] = c->color.g;
-      w.color[3 * i + 2] = c->color.b;
-      w.last_seen[i] = c->last_seen;
-      w.min_distance[i] = c->min_distance;
-    }
-  }
+  columns_.forEachShowing(key_x0, key_y0, width, height, [&](int64_t kx, int64_t ky, const Column& c) {
+    const size_t i = size_t(ky - key_y0) * width + size_t(kx - key_x0);
+    w.observed[i] = 1;
+    w.elevation[i] = static_cast<float>(geometry_.keyToCoord(c.top) + 0.5 * res);
+    w.color[3 * i] = c.color.r;
+    w.color[3 * i + 1] = c.color.g;
+    w.color[3 * i + 2] = c.color.b;
+    w.last_seen[i] = c.last_seen;
+    w.min_distance[i] = c.min_distance;
+  });
   return w;
 }
 
