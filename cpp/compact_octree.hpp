@@ -4,7 +4,7 @@
 // OctoMap spends 16 bytes per node plus a 64-byte array of child pointers per inner node. Here
 // the 8 children of an inner node live together in one 64-byte group of 8-byte nodes (log-odds
 // and a 32-bit link), so a child costs nothing beyond its group; groups and attribute records sit
-// in fixed-size chunks (stable addresses, no doubling slack) with free lists. The attributes
+// in chunks (stable addresses, never copied, at most one chunk's slack) with free lists. The attributes
 // (color, last seen, min distance) exist only for voxels that were hit: a leaf links to its
 // record, an inner node to its children. Unknown children are NaN log-odds.
 #pragma once
