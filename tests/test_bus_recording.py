@@ -47,12 +47,13 @@ def recorded(tmp_path_factory):
         recorder = Recorder(recorder_session, path, 'vehicles = ["uav1"]\n')
         sent = bus_messages(150)
         publishers = {key: nodes.declare_publisher(key) for key in {k for k, _ in sent}}
-        wait_for(lambda: all(p.matching_status.matching for p in publishers.values()), "the recorder's subscription")
+        wait_for(lambda: all(p.matching_status.matching for p in publishers.values()), "the recorder's subscription",
+                 timeout=60.0)
         for key, payload in sent:
             publish(nodes, key, payload)
         publish(nodes, "layerpilot/uav1/unknown", b"\x08\x01")  # not one of ours: rejected, not recorded
         wait_for(lambda: sum(recorder.writer.written.values()) + recorder.writer.rejects.total >= len(sent) + 1,
-                 "every message at the recorder")
+                 "every message at the recorder", timeout=60.0)
         summary = recorder.stop()
     return path, sent, summary
 
