@@ -62,7 +62,8 @@ class Chromium:
 
     def open(self, url: str) -> None:
         target = self.call("Target.createTarget", {"url": url}, page=False)["targetId"]
-        self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True}, page=False)["sessionId"]
+        attached = self.call("Target.attachToTarget", {"targetId": target, "flatten": True}, page=False)
+        self.session = attached["sessionId"]
 
     def evaluate(self, expression: str):
         return self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True})["result"].get("value")
