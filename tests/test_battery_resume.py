@@ -2,13 +2,16 @@
 pilot turns home when the way home plus the reserve needs the charge left (in time, with real
 numbers); a lock-step mission with a small battery ends with that return; the survey's state is
 saved and a fresh pilot continues it (path history, schedule phase, counts; the map from the
-snapshot); the link node RTLs on the pilot's battery return; `up --resume` needs a saved survey."""
+snapshot) on one mission clock (cells of the first flight as old as they are, after_time phases
+counting on); the link node RTLs on the pilot's battery return and reports the autopilot's own
+battery failsafe as such, stamping its poses on the mission clock; `up --resume` needs a saved survey."""
 
 from __future__ import annotations
 
 import json
 import re
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +22,8 @@ from test_link_reboot import flying_link_node
 from layerpilot.bus.keys import Keys
 from layerpilot.cli import main as cli_main
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
-from layerpilot.bus.messages import MissionState, State, decode_mission_state, encode_mission_state, encode_state
+from layerpilot.bus.messages import (MissionState, State, decode_mission_state, decode_state, encode_mission_state,
+                                     encode_state)
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
 from layerpilot.eval.mission import run_mission
 from layerpilot.geometry import Pose
@@ -28,7 +32,9 @@ from layerpilot.link.connection import open_connection
 from layerpilot.link.link import FlightLink
 from layerpilot.map import VoxelMap
 from layerpilot.mission import resume as survey
+from layerpilot.layers import compute_layers
 from layerpilot.mission.build import build_pilot
+from layerpilot.mission.clock import MissionClock
 from layerpilot.mission.config import Override, load_mission
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
@@ -61,6 +67,12 @@ def test_the_simulated_battery_reports_as_arducopter_and_its_failsafe_rtls():
             wait_for(lambda: link.mode == "RTL", "the battery failsafe", timeout=20)
             wait_for(lambda: "Battery 1 is low 15.00V used 50 mAh" in link._texts, "ArduCopter's failsafe text")
             assert link.telemetry().battery_remaining <= 50     # SYS_STATUS: 50 mAh of 100 left, or less by now
+            # the autopilot's own failsafe, not a pilot: the text came just before the mode change
+            found = re.fullmatch(r"autopilot failsafe: battery \(Battery 1 is low 15\.00V used 50 mAh, (\d+)% "
+                                 r"left\): RTL", link.failsafe)
+            assert found and 42 <= int(found[1]) <= 50, link.failsafe  # 4 %/s: the charge at the mode's heartbeat
+            assert link.upsets[-1] == ("failsafe", link.failsafe) and link.failsafe in link.events
+            assert not any("took over" in e for e in link.events)
         vehicle.pause_output()  # what was sent so far, and no more
         statuses = []  # every BATTERY_STATUS the ground station got; the newest counts
         while (m := gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=0.5)) is not None:
@@ -151,10 +163,49 @@ def test_the_survey_is_saved_and_a_fresh_pilot_continues_it(flown, tmp_path):
     MapService(cfg, VoxelMap.load(out / "map.ot")).snapshot()
     service = MapService.start(cfg)
     assert service.map.stats()["leaves"] == VoxelMap.load(out / "map.ot").stats()["leaves"] > 1000
+    # the new flight's stamps go on from the saved mission time (the autopilot's clock starts at 0 again)
+    (tmp_path / "state").mkdir()
+    (tmp_path / "state" / "uav1.json").write_text(json.dumps(state))
+    clock = survey.clock_after(tmp_path / "state", ["uav1", "uav2"])  # uav2 saved nothing: uav1's time
+    assert clock.start == state["time"] > 30.0 and clock(0.5) == state["time"] + 0.5
+    # a cloud of the new flight, 0.5 s after its autopilot booted, sees something 45 m up, 60 m north-east
+    patch = np.array([(60.0 + dx, 60.0 + dy, 45.0) for dx in np.arange(-3, 3, 0.5) for dy in np.arange(-3, 3, 0.5)])
+    service.insert(patch, np.array([60.0, 60.0, 80.0]), None, stamp=clock(0.5))
+    columns = service.columns()
+    now = clock(1.0)
+    time_layer = compute_layers(columns, resumed.layer_context(columns, (0.0, 0.0, 50.0), now), ["time"]).layers["time"]
+    seen = columns.observed
+    fresh = seen & (np.abs(columns.last_seen - clock(0.5)) < 1e-3)  # the map keeps times in float32
+    first = seen & (columns.last_seen == columns.last_seen[seen].min())  # the cells the first flight saw first
+    assert fresh.sum() >= 30 and first.any() and (now - columns.last_seen[seen] > 0.499).all()  # none in the future
+    assert (time_layer[fresh] == 0.0).all() and (time_layer[first] == 1.0).all()  # just seen; seen longest ago
+    # on the vehicle's clock (restarted at 0) the patch, stamped 0.5, would be older than the whole first flight
+    assert (columns.last_seen[seen & ~fresh] > 0.5 + 1e-3).all()
     # the pilot continues: a fresh battery (a swap), at home, a new decision numbered after the saved ones
-    command = resumed.step((0.0, 0.0, 50.0), 1.0, service.columns(), battery=1.0)
+    command = resumed.step((0.0, 0.0, 50.0), now, columns, battery=1.0)
     assert command is not None and command.reason == "resume" and command.seq == state["seq"] + 1
-    assert command.decision.history > 0.0  # not a cell it has just been over
+    assert command.time == now and command.decision.history > 0.0  # not a cell it has just been over
+
+
+def test_an_after_time_phase_counts_on_the_mission_clock_after_a_resume(flown, tmp_path):
+    """A phase after 60 mission s: a survey saved at 50 s reaches it 10 s into the resumed flight, on the
+    mission clock; on the restarted autopilot's clock it would wait until 60 s of the new flight."""
+    _, out, _ = flown
+    behavior = tmp_path / "patrol-after-a-minute.toml"
+    behavior.write_text(Path("config/behaviors/explore-then-patrol.toml").read_text().replace(
+        "after_coverage = 0.85", "after_time = 60.0"))
+    mission = load_mission("default", [Override("--behavior", "decide.behavior", str(behavior)),
+                                       Override("--state", "decide.state", str(tmp_path / "state"))])
+    survey.save(build_pilot(mission), survey.state_file(tmp_path / "state", "uav1"), 50.0, 45.0)
+    clock = survey.clock_after(tmp_path / "state", mission.vehicles)
+    service = MapService(mission.map_server, VoxelMap.load(out / "map.ot"))
+    phases = {}
+    for name, stamp in (("mission clock", clock(10.0)), ("vehicle clock", 10.0)):
+        pilot = build_pilot(mission)
+        survey.load(pilot, survey.state_file(tmp_path / "state", "uav1"))
+        command = pilot.step((0.0, 0.0, 50.0), stamp, service.columns(), battery=1.0)
+        phases[name] = (pilot.maker.schedule.phase, command.decision.weights)
+    assert phases == {"mission clock": (1, {"time": 1.0}), "vehicle clock": (0, {"fringe": 1.0})}
 
 
 def test_resume_keeps_the_schedule_phase_and_refuses_what_it_cannot_use(tmp_path):
@@ -180,6 +231,28 @@ def test_up_resume_without_a_saved_survey_says_so(tmp_path):
         up(str(m), resume=True, log_dir=tmp_path / "logs")
     assert not (tmp_path / "logs").exists()  # nothing was started
     assert cli_main(["up", "--mission", str(m), "--resume", "--log-dir", str(tmp_path / "logs")]) == 2
+
+
+def test_link_node_reports_the_autopilots_battery_failsafe_and_stamps_on_the_mission_clock():
+    """200 mAh at 15 A, BATT_LOW_MAH 100: the autopilot's own RTL 24 s after arming (2.4 s at 10x); the
+    node's poses are stamped 500 s (a resumed survey's saved time) + the autopilot's time_boot_ms."""
+    vehicle = start_vehicle(BatteryConfig(capacity_mah=200.0, low_mah=100.0, idle_current_a=0.0))
+    stamps: list[tuple[float, float]] = []  # (pose stamp, the vehicle's uptime when it arrived)
+    try:
+        with flying_link_node(vehicle, MissionClock(500.0), end_action="loiter") as (node, session):
+            sub = session.declare_subscriber(Keys("uav1").pose, lambda s: stamps.append(
+                (decode_state(s.payload.to_bytes()).stamp, vehicle.uptime)))
+            wait_for(lambda: node.phase.startswith("returning home"), "the autopilot's failsafe", timeout=20)
+            sub.undeclare()
+            found = re.fullmatch(r"returning home: autopilot failsafe: battery \(Battery 1 is low 15\.00V used "
+                                 r"100 mAh, (\d+)% left\): RTL", node.phase)
+            assert found and 46 <= int(found[1]) <= 50, node.phase  # 2 %/s: the charge at the mode's heartbeat
+            assert not any("took over" in e for e in node.link.events) and node.end == ""
+        assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the autopilot's return alone
+        assert len(stamps) > 5 and all(500.0 < stamp <= 500.0 + uptime for stamp, uptime in stamps)
+        assert all(500.0 + uptime - stamp < 2.0 for stamp, uptime in stamps[-3:])  # pose rate, mission s at 10x
+    finally:
+        vehicle.stop()
 
 
 def test_link_node_commands_rtl_when_the_pilot_turns_home_for_the_battery():

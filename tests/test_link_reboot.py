@@ -24,6 +24,7 @@ from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import ControlLost, FlightLink, LinkError
+from layerpilot.mission.clock import MissionClock
 from layerpilot.mission.config import LinkSettings, load_mission
 from layerpilot.nodes.link import LinkNode
 from layerpilot.sim.mavlink_vehicle import FORCE_DISARM_MAGIC, MavlinkVehicle
@@ -32,12 +33,12 @@ GUIDED, LOITER = 4, 5  # ArduCopter custom modes
 
 
 @contextmanager
-def flying_link_node(vehicle: MavlinkVehicle, **settings):
+def flying_link_node(vehicle: MavlinkVehicle, clock: MissionClock = MissionClock(), **settings):
     """A link node on a real Zenoh session, flying ``vehicle`` (taken off to 15 m); yields (node, session)."""
     cfg = LinkSettings(link=LinkConfig(url=url_of(vehicle), **FAST), takeoff_altitude=15.0, **settings)
     stop = threading.Event()
     with open_session(BusConfig(endpoint=free_endpoint())) as session:
-        node = LinkNode(session, "uav1", cfg, Geofence.circle((0.0, 0.0), 200.0))
+        node = LinkNode(session, "uav1", cfg, Geofence.circle((0.0, 0.0), 200.0), clock)
         runner = threading.Thread(target=node.run, args=(stop,))
         runner.start()
         try:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from layerpilot.cli.nodes import Running, add_node_command
+from layerpilot.cli.nodes import Running, add_clock_flag, add_node_command, clock_from_args
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -17,6 +17,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--mavlink", metavar="URL",
                    help="tcp:HOST:PORT (ArduPilot SITL 5760), udpin:0.0.0.0:14540 (PX4 SITL), /dev/ttyUSB0:57600 "
                         "(default: the mission's for this vehicle)")
+    add_clock_flag(p)
     p.add_argument("--sysid", type=int, help="our MAVLink system id (default 1, like a companion)")
     p.add_argument("--compid", type=int, help="our MAVLink component id (default 191, onboard computer)")
     p.add_argument("--timeout", type=float,
@@ -62,7 +63,8 @@ def _node(args, mission, vehicle, session) -> Running:
     from layerpilot.mission.build import geofence_for
     from layerpilot.nodes.link import LinkNode
 
-    node = LinkNode(session, vehicle, link_settings(args, mission, vehicle), geofence_for(mission))
+    node = LinkNode(session, vehicle, link_settings(args, mission, vehicle), geofence_for(mission),
+                    clock_from_args(args))
     link = node.link
 
     def status() -> dict:

@@ -29,6 +29,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = add_node_command(commands, "decide", _decide, "layer sets + pose in, decisions and waypoints out")
     p.add_argument("--resume", action="store_true",
                    help="continue the survey saved in decide.state (path history, schedule phase, counts)")
+    p.add_argument("--mission-id", default="",
+                   help="the mission run this node belongs to (`up` gives one per run): a state saved in the "
+                        "same run, by this node before a crash, is continued; another run's is not")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
@@ -68,6 +71,23 @@ def add_node_command(commands: argparse._SubParsersAction, role: str, build: Bui
                                          "secrets directory); without it the node joins as an open peer")
     p.set_defaults(func=_run_node, role=role, build=build, mission_flags=flags or {})
     return p
+
+
+def add_clock_flag(p: argparse.ArgumentParser) -> None:
+    """``--clock-start``: where the node's stamps start on the mission clock (mission.clock)."""
+    p.add_argument("--clock-start", type=float, default=0.0, metavar="SECONDS",
+                   help="mission time when the vehicle's clock reads 0 (`up --resume` gives the survey's "
+                        "saved mission time, so a resumed flight goes on on one clock; default 0)")
+
+
+def clock_from_args(args: argparse.Namespace):
+    """The mission clock ``--clock-start`` asks for; a bad value is an error naming the flag."""
+    from layerpilot.mission.clock import MissionClock
+
+    try:
+        return MissionClock(args.clock_start)
+    except ValueError as exc:
+        raise ValueError(f"--clock-start: {exc}") from None
 
 
 def mission_from_args(args: argparse.Namespace, flags: dict[str, str | tuple[str, ...]], extra: list | tuple = ()):
@@ -193,7 +213,7 @@ def _map_server(args, mission, vehicle, session) -> Running:
 def _decide(args, mission, vehicle, session) -> Running:
     from layerpilot.nodes.decide import DecideNode
 
-    node = DecideNode(session, vehicle, mission, resume=args.resume)
+    node = DecideNode(session, vehicle, mission, resume=args.resume, mission_id=args.mission_id)
     node.start()
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},

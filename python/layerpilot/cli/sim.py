@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from layerpilot.cli.nodes import Running, add_node_command
+from layerpilot.cli.nodes import Running, add_clock_flag, add_node_command, clock_from_args
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -20,6 +20,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--flavour", choices=("ardupilot", "px4"), help="autopilot conventions (default: the mission's)")
     p.add_argument("--speed", type=float, help="mission clock speed vs real time (default: the mission's)")
     p.add_argument("--duration", type=float, help="stop after this many mission seconds (default: until SIGTERM)")
+    add_clock_flag(p)  # camera-only frames take the poses' stamps, already on the mission clock
     sub = p.add_subparsers(dest="sim_command", metavar="ACTION")
     pv = sub.add_parser("preview", help="write a PNG: camera view, its depth, top-down map of the world")
     # SUPPRESS: given before or after `preview`, these keep their value
@@ -52,10 +53,11 @@ def _node(args, mission, vehicle, session) -> Running:
                        info={"camera_only": True}, run=node.run)
     config = dataclasses.replace(mission.sim, urls=(args.mavlink or mission.mavlink_url(vehicle),))
     try:
-        node = SimNode(session, vehicle, config, speed=mission.speed, duration=args.duration)
+        node = SimNode(session, vehicle, config, speed=mission.speed, duration=args.duration,
+                       clock=clock_from_args(args))
     except OSError as exc:  # the MAVLink port is taken or the address is wrong
         raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
-    return Running(lambda: {"frames": node.frames, "time": round(node.sim.time, 2)}, info=node.describe(),
+    return Running(lambda: {"frames": node.frames, "time": round(node.clock(node.sim.time), 2)}, info=node.describe(),
                    run=node.run)
 
 

@@ -19,7 +19,10 @@ Failsafes:
   * a rejected COMMAND_ACK raises :class:`CommandRejected` naming the MAV_RESULT
     (and is reported even when nobody waits for it);
   * a mode change away from GUIDED/OFFBOARD made by someone else pauses the link
-    until that mode is handed back (a pilot takeover);
+    until that mode is handed back (a pilot takeover); one that follows within
+    ``FAILSAFE_TEXT_S`` a low-battery STATUSTEXT of the autopilot is its battery failsafe
+    (ArduCopter "Battery 1 is low ...", PX4 "Low battery level! ..."): reported as
+    ``autopilot failsafe: battery ...`` and kept in ``failsafe``, never as a takeover;
   * a reboot of the autopilot (its uptime, time_boot_ms, going backwards) is reported as
     such, never as a takeover: the link lets go of the vehicle (``reboots`` counts them);
     a disarm while the link flies is reported after ``REBOOT_GRACE_S`` unless it was a reboot.
@@ -27,7 +30,7 @@ Failsafes:
 follows MISSION_CURRENT and MISSION_ITEM_REACHED; AUTO is then the mode the link flies in,
 so another mode is a takeover as above.
 Every wait (arrival, takeoff, readiness, the mission, the end action's acknowledgement) ends at once
-with :class:`ControlLost` (``kind``: ``takeover``, ``disarmed`` or ``reboot``) when one
+with :class:`ControlLost` (``kind``: ``takeover``, ``failsafe``, ``disarmed`` or ``reboot``) when one
 of these happens while it runs.
 Every report goes to ``events`` (a list of strings), the ``on_event`` callback and
 the ``layerpilot.link`` logger.
@@ -37,6 +40,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 import time
 from collections import Counter
@@ -65,6 +69,9 @@ END_ACTIONS = {"rtl": "RTL", "land": "LAND", "loiter": "LOITER"}  # mission end 
 EKF_POSITION = mav.EKF_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_REL
 REBOOT_BACKSTEP_S = 1.0  # the autopilot's uptime went back by more than this: it rebooted
 REBOOT_GRACE_S = 0.3     # a disarm waits this long for the reboot that may explain it (same burst)
+FAILSAFE_TEXT_S = 5.0    # a mode change this soon after a low-battery STATUSTEXT is the autopilot's failsafe
+LOW_BATTERY_TEXT = re.compile(r"batt\w*\b.*\b(low|critical|failsafe|emergency)|(low|critical|emergency)\b.*batt",
+                              re.IGNORECASE)  # ArduPilot's and PX4's low-battery warnings
 UPTIME_MESSAGES = ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME")  # time_boot_ms
 
 
@@ -94,8 +101,8 @@ class CommandRejected(LinkError):
 
 
 class ControlLost(LinkError):
-    """A wait ended because the vehicle was taken over, disarmed or rebooted; ``kind`` says which
-    (``takeover``, ``disarmed``, ``reboot``)."""
+    """A wait ended because the vehicle was taken over, failed safe, disarmed or rebooted; ``kind``
+    says which (``takeover``, ``failsafe``, ``disarmed``, ``reboot``)."""
 
     def __init__(self, message: str, kind: str) -> None:
         super().__init__(message)
@@ -154,6 +161,8 @@ class FlightLink:
         self._acks: dict[int, int] = {}
         self._waited: set[int] = set()
         self._texts: list[str] = []
+        self._low_battery: tuple[float, str] | None = None  # (monotonic, text) of the newest low-battery STATUSTEXT
+        self.failsafe = ""          # the autopilot's own failsafe took the vehicle (what it said), if it did
         # control state
         self._in_control = False    # we put the vehicle in GUIDED/OFFBOARD and fly it
         self._auto = False          # ... or in AUTO, flying its stored mission (fly_mission)
@@ -846,6 +855,8 @@ class FlightLink:
             elif kind == "STATUSTEXT":
                 self._texts = self._texts[-19:] + [msg.text]
                 log.info("autopilot: %s", msg.text)
+                if LOW_BATTERY_TEXT.search(msg.text):
+                    self._low_battery = (time.monotonic(), msg.text)
             self._cond.notify_all()
         if rebooted:
             self._report(rebooted)
@@ -878,8 +889,13 @@ class FlightLink:
             elif self._in_control and not self._paused and self._mode != guided and old == guided:
                 if not (restored and self.flavour == modes.PX4 and self._mode == modes.HOLD_MODE[modes.PX4]):
                     self._paused = True
-                    reports.append(f"pilot took over: mode {self._mode}; paused until {guided} is handed back")
-                    self.upsets.append(("takeover", reports[-1]))
+                    if failsafe := self._battery_failsafe():
+                        self.failsafe = failsafe
+                        reports.append(failsafe)
+                        self.upsets.append(("failsafe", failsafe))
+                    else:
+                        reports.append(f"pilot took over: mode {self._mode}; paused until {guided} is handed back")
+                        self.upsets.append(("takeover", reports[-1]))
             elif self._in_control and self._paused and self._mode == guided:
                 self._paused = False
                 reports.append(f"control handed back ({guided}); resuming")
@@ -888,6 +904,14 @@ class FlightLink:
             self._report(text)
         if restored and self._lost_at:
             self._after_restore()
+
+    def _battery_failsafe(self) -> str:
+        """What the autopilot's battery failsafe said, if the mode change just seen is one (else "")."""
+        if self._low_battery is None or time.monotonic() - self._low_battery[0] > FAILSAFE_TEXT_S:
+            return ""
+        remaining = self._battery[1]
+        left = f", {remaining}% left" if 0 <= remaining <= 100 else ""
+        return f"autopilot failsafe: battery ({self._low_battery[1]}{left}): {self._mode}"
 
     def _on_restored(self) -> list[str]:
         lost_for = time.monotonic() - self._lost_at

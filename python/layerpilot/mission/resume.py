@@ -8,6 +8,10 @@ server's newest snapshot (``map_server.snapshot``), which it reloads at start.
 
 After a resume the pilot chooses afresh from where the drone is (reason ``resume``): the
 decision maker with the restored history and phase, a pattern from the leg it was flying.
+The resumed flight's stamps go on from the newest saved mission time (:func:`clock_after`,
+mission.clock). The state also names the mission run that saved it (``mission_id``, one per
+`up`): a decide node that `up` restarts after a crash continues its predecessor's state,
+even its battery return; a new run starts fresh unless resumed.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from layerpilot.grid import GridGeometry
+from layerpilot.mission.clock import MissionClock
 from layerpilot.mission.pilot import Pilot
 
 VERSION = 1
@@ -31,10 +36,34 @@ def state_file(directory: str | Path, vehicle: str) -> Path:
     return Path(directory) / f"{vehicle}.json"
 
 
-def snapshot(pilot: Pilot, time: float, flown_s: float) -> dict[str, Any]:
+def clock_after(directory: str | Path, vehicles: list[str] | tuple[str, ...]) -> MissionClock:
+    """The clock of the flight that resumes the survey saved in ``directory``: on from the newest
+    mission time any of ``vehicles`` saved (one clock for all, as the map server's cells share it)."""
+    times = []
+    for vehicle in vehicles:
+        path = state_file(directory, vehicle)
+        try:
+            times.append(float(json.loads(path.read_text())["time"]))
+        except FileNotFoundError:
+            continue
+        except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: damaged mission state: {type(exc).__name__}: {exc}") from None
+    return MissionClock(max(times, default=0.0))
+
+
+def saved_mission_id(path: str | Path) -> str:
+    """The mission run (``mission_id``) that saved ``path``; "" if none or unreadable (then nothing continues)."""
+    try:
+        return str(json.loads(Path(path).read_text()).get("mission_id", ""))
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return ""
+
+
+def snapshot(pilot: Pilot, time: float, flown_s: float, mission_id: str = "") -> dict[str, Any]:
     """The pilot's survey state as plain JSON-ready data; ``time`` is the newest mission-clock stamp."""
     maker = pilot.maker
     return {"version": VERSION, "behavior": pilot.cfg.behavior, "time": float(time), "flown_s": float(flown_s),
+            "mission_id": mission_id,
             "seq": pilot.seq, "reached": pilot.reached, "ending": pilot.ending,
             "target": None if pilot.target is None else [float(v) for v in pilot.target],
             "next_pattern": pilot._next_pattern,
@@ -43,18 +72,20 @@ def snapshot(pilot: Pilot, time: float, flown_s: float) -> dict[str, Any]:
             "ticks": [list(t) for t in pilot.ticks]}
 
 
-def save(pilot: Pilot, path: str | Path, time: float, flown_s: float) -> None:
+def save(pilot: Pilot, path: str | Path, time: float, flown_s: float, mission_id: str = "") -> None:
     """Write the state atomically (a crash mid-write leaves the previous file whole)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(snapshot(pilot, time, flown_s)))
+    tmp.write_text(json.dumps(snapshot(pilot, time, flown_s, mission_id)))
     os.replace(tmp, path)
 
 
-def load(pilot: Pilot, path: str | Path) -> dict[str, Any]:
+def load(pilot: Pilot, path: str | Path, same_flight: bool = False) -> dict[str, Any]:
     """Restore a fresh pilot from ``path``; returns the saved state. ValueError names what is wrong
-    (a missing or damaged file, another behavior's state)."""
+    (a missing or damaged file, another behavior's state). ``same_flight``: a restarted node of the
+    same flight (the battery is the same: a battery return stays the flight's end); else a new
+    flight after a battery swap, which may survey again."""
     path = Path(path)
     try:
         state = json.loads(path.read_text())
@@ -64,6 +95,7 @@ def load(pilot: Pilot, path: str | Path) -> dict[str, Any]:
         raise ValueError(f"{path}: damaged mission state: {exc}") from None
     try:
         _restore(pilot, state)
+        pilot.ending = str(state["ending"]) if same_flight else ""
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: damaged mission state: {type(exc).__name__}: {exc}") from None
     return state

@@ -56,14 +56,27 @@ def decision_message(command: Command, vehicle: str, behavior: str) -> Decision:
 
 class DecideNode:
     def __init__(self, session: zenoh.Session, vehicle: str, mission: Mission,
-                 supervisor: Supervisor | None = None, resume: bool = False) -> None:
-        """``resume``: continue the survey saved in ``decide.state`` (ValueError if there is none)."""
+                 supervisor: Supervisor | None = None, resume: bool = False, mission_id: str = "") -> None:
+        """``resume``: continue the survey saved in ``decide.state`` (ValueError if there is none), a new
+        flight. ``mission_id``: the `up` run this node belongs to; a state saved by the same run (this
+        node's predecessor, before it crashed) is continued as the same flight (``continued``), with or
+        without ``resume``."""
         self.session, self.keys, self.mission = session, keys.Keys(vehicle), mission
         self.pilot = build_pilot(mission)
+        self.mission_id = mission_id
         self.state_path = survey.state_file(mission.decide.state, vehicle) if mission.decide.state else None
-        self.resumed = survey.load(self.pilot, self._require_state()) if resume else None
-        self._flown_before = self.resumed["flown_s"] if self.resumed else 0.0  # mission s of earlier flights
-        self._first_stamp: float | None = None
+        self.continued = bool(mission_id and self.state_path is not None  # also under --resume: a restart
+                              and survey.saved_mission_id(self.state_path) == mission_id)
+        self.resumed = survey.load(self.pilot, self._require_state(), same_flight=self.continued) \
+            if resume or self.continued else None
+        self._flown_before = self.resumed["flown_s"] if self.resumed else 0.0  # mission s flown before this node
+        # the same flight goes on: its time since the predecessor's last save was flown too
+        self._first_stamp: float | None = self.resumed["time"] if self.continued else None
+        if self.resumed:
+            _log.warning("%s the survey saved at mission time %.1f s: %d decisions, %d reached%s",
+                         "continuing (restarted)" if self.continued else "resuming", self.resumed["time"],
+                         self.pilot.seq, self.pilot.reached,
+                         f", ended: {self.pilot.ending}" if self.pilot.ending else "")
         self.rejects = Rejects(_log)
         self.supervisor = supervisor or Supervisor(_log)
         self._columns: ColumnLayers | None = None
@@ -114,7 +127,7 @@ class DecideNode:
         """The survey's state for `up --resume` (after every command and at the end)."""
         if self.state_path is not None:
             flown = self._flown_before + (0.0 if self._first_stamp is None else max(0.0, stamp - self._first_stamp))
-            survey.save(self.pilot, self.state_path, stamp, flown)
+            survey.save(self.pilot, self.state_path, stamp, flown, self.mission_id)
 
     def _on_layers(self, ls: GridLayersMessage, key: str) -> None:
         try:

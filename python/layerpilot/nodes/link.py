@@ -10,9 +10,11 @@ acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervi
 autopilot (told apart from a pilot takeover by the link) ends the flying (``on_reboot = "end"``) or
 pauses it until a pilot has the vehicle armed, airborne and in GUIDED again (``"pause"``). When the
 pilot turns home for the battery (the mission state's phase ``return: battery``) the node commands
-RTL at once: the autopilot flies home and lands, and the mission's end leaves it so. Pose stamps are the autopilot's
-clock (time_boot_ms): the simulator stamps its camera frames, and so the clouds and layer
-sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
+RTL at once: the autopilot flies home and lands, and the mission's end leaves it so; the same when
+the autopilot's own battery failsafe took the vehicle home (``link.failsafe``: not a takeover). Pose stamps are the autopilot's
+clock (time_boot_ms) on the mission clock (mission.clock: + the saved mission time when a survey
+resumes): the simulator node stamps its camera frames, and so the clouds and layer sets, with the
+same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from layerpilot.bus.session import publish
 from layerpilot.geometry import Pose
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
+from layerpilot.mission.clock import MissionClock
 from layerpilot.mission.config import LinkSettings
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.link.modes import GUIDED_MODE
@@ -47,12 +50,15 @@ class LinkNode:
 
     ``connected`` is set once the autopilot's HEARTBEAT was heard (the node says ``ready`` then,
     ``connecting`` before); ``phase`` is ``connecting``, ``waiting for the autopilot``, ``taking off``,
-    ``flying``, ``ended: autopilot rebooted`` or ``paused: autopilot rebooted ...`` (``on_reboot``),
+    ``flying``, ``returning home ...`` (a battery return: the pilot's or the autopilot's failsafe),
+    ``ended: autopilot rebooted`` or ``paused: autopilot rebooted ...`` (``on_reboot``),
     ``ending`` or ``ended``; a link that cannot connect or take off fails the node
     (``supervisor.failure`` says why). ``end`` says what the end action did (see :meth:`stop`)."""
 
-    def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence) -> None:
+    def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence,
+                 mission_clock: MissionClock = MissionClock()) -> None:
         self.session, self.keys, self.cfg = session, keys.Keys(vehicle), cfg
+        self.mission_clock = mission_clock  # pose stamps: the autopilot's time_boot_ms on the mission clock
         self.rejects = Rejects(_log)
         self.supervisor = Supervisor(_log)
         self.connected = threading.Event()
@@ -117,6 +123,9 @@ class LinkNode:
                 _, self.end = self.link.end_mission("rtl", self.cfg.end_timeout)
                 self.phase = f"returning home for the battery: {self.end}"
                 _log.warning("%s", self.phase)
+            if self.link.failsafe and self.phase == "flying":  # the autopilot's own return: as the pilot's
+                self.phase = f"returning home: {self.link.failsafe}"
+                _log.warning("%s; the mission's end leaves it so", self.phase)
             if self.link.reboots == reboots:
                 continue
             reboots = self.link.reboots
@@ -178,7 +187,7 @@ class LinkNode:
         if t.link_ok:
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
-                t.boot_time, self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
+                self.mission_clock(t.boot_time), self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
                 t.armed, t.mode, battery)))
             self.poses += 1
         return True

@@ -18,6 +18,7 @@ from layerpilot.bus.messages import FrameMessage, State, decode_state, encode_fr
 from layerpilot.bus.reject import Rejects
 from layerpilot.bus.session import publish
 from layerpilot.geometry import CameraFrame, Pose
+from layerpilot.mission.clock import MissionClock
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.runner import WAKE_PERIOD
 
@@ -36,19 +37,22 @@ def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, frame: CameraF
 
 class SimNode:
     def __init__(self, session: zenoh.Session, vehicle: str, sim_config, *, speed: float = 1.0,
-                 duration: float | None = None, publish_depth: bool = True) -> None:
+                 duration: float | None = None, publish_depth: bool = True, clock: MissionClock = MissionClock()) -> None:
+        """``clock``: the frames' stamps on the mission clock (the vehicle's clock + its start, mission.clock)."""
         from layerpilot.sim.simulator import Simulator
 
         self.session, self.keys = session, keys.Keys(vehicle)
         self.sim = Simulator(sim_config)
         self.speed, self.duration = speed, duration
         self.publish_depth = publish_depth
+        self.clock = clock
         self.frames = 0
 
     def _on_frame(self, stamp: float, frame: CameraFrame) -> None:
         self.frames += 1
         # the link node publishes the vehicle's pose in its MAVLink local frame (z = 0 on the ground at home,
         # ArduCopter's EKF origin): the frames go out in that frame too, the mission's map frame
+        frame = dataclasses.replace(frame, stamp=self.clock(frame.stamp))  # as the link node stamps the poses
         publish_frame(self.session, self.keys, self.frames, frame, self.publish_depth,
                       float(self.sim.endpoint.ekf_origin[2]))
 

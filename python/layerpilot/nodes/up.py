@@ -16,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -86,10 +87,13 @@ class NodeProcess:
 
 
 def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
-                  secrets=None, resume: bool = False) -> list[NodeProcess]:
+                  secrets=None, resume: bool = False, clock_start: float = 0.0,
+                  mission_id: str = "") -> list[NodeProcess]:
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide; with
     ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file;
-    ``resume``: the decide nodes continue the saved survey (``decide --resume``)."""
+    ``resume``: the decide nodes continue the saved survey (``decide --resume``); ``clock_start``:
+    where the sim and link nodes' stamps start on the mission clock (``--clock-start``);
+    ``mission_id``: this run's, so that a restarted decide node continues what it saved."""
     from layerpilot.bus.security import node_user
 
     base = [sys.executable, "-m", "layerpilot.cli"]
@@ -101,8 +105,9 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
         for role in ("sim", "link", "depth", "decide"):
-            again = ["--resume"] if resume and role == "decide" else []
-            argv = base + [role, "--vehicle", v] + common + login(role, v) + again
+            own = {"decide": ["--mission-id", mission_id] + (["--resume"] if resume else []),
+                   "sim": ["--clock-start", repr(clock_start)], "link": ["--clock-start", repr(clock_start)]}
+            argv = base + [role, "--vehicle", v] + common + login(role, v) + own.get(role, [])
             nodes.append(NodeProcess(f"{role}/{v}", argv))
     return nodes
 
@@ -185,13 +190,15 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
 
     path = resolve(mission)
     m = load_mission(path)  # refuse a bad file before anything starts
+    clock = 0.0  # mission time when the vehicles' clocks read 0: the survey's saved time when it resumes
     if resume:  # before anything starts: a survey to continue must exist
-        from layerpilot.mission.resume import state_file
+        from layerpilot.mission.resume import clock_after, state_file
 
         missing = [v for v in m.vehicles if not m.decide.state or not state_file(m.decide.state, v).exists()]
         if missing:
             raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
                              f"({m.decide.state!r})")
+        clock = clock_after(m.decide.state, m.vehicles).start  # read once: restarted nodes keep this start
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -201,7 +208,9 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
         session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume), Path(log_dir))
+    mission_id = uuid.uuid4().hex[:12]
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id),
+                     Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud
         from layerpilot.bus.recording import Recorder
@@ -209,7 +218,8 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
         recorder = Recorder(session, record, path.read_text())
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
-          f"node logs in {log_dir}/", flush=True)
+          f"node logs in {log_dir}/; mission {mission_id}"
+          + (f", resumed at mission time {clock:.1f} s" if resume else ""), flush=True)
     print(f"layerpilot up: bus secured: operator credentials in {secrets.credentials_file('operator')}"
           if secrets else "layerpilot up: bus.security = false: ANY process that reaches "
           f"{bus.endpoint} can publish waypoints", flush=True)

@@ -1,0 +1,30 @@
+"""The mission clock: one clock over all of a survey's flights.
+
+Every stamp of a mission (poses, camera frames, so clouds, map insertion times, layer sets,
+decisions, the saved survey) is on the vehicle's clock: the autopilot's time_boot_ms, which the
+simulator's clock equals. An autopilot that is switched off for a battery swap starts that
+clock at 0 again, so a resumed flight (``up --resume``) stamps ``start + vehicle time``, with
+``start`` the newest mission time its survey saved: cells seen in an earlier flight are as old
+as they are, and ``after_time`` schedule phases count on. The stamps are made on this clock
+where they are made (the link node's poses, the simulator node's frames); every consumer reads
+them as they come.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class MissionClock:
+    """Mission time = ``start`` + the vehicle's clock (s); ``start`` is 0 for a mission's first flight."""
+
+    start: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.start) and self.start >= 0.0):
+            raise ValueError(f"mission clock start: expected finite seconds >= 0, got {self.start}")
+
+    def __call__(self, vehicle_time: float) -> float:
+        return self.start + vehicle_time
