@@ -1,9 +1,11 @@
 """The whole loop as processes on loopback: sim -> depth -> map-server -> decide -> link -> sim for two
 drones sharing one map server, started by `layerpilot up`; the map server is killed with SIGKILL
-mid-mission and must come back from its snapshot."""
+mid-mission and must come back from its snapshot, and uav1's decide node with it: `up` restarts it and
+it continues the survey state it saved (numbering, arrivals, path history), not a fresh one."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -41,7 +43,7 @@ layers_rate = 2.0
 window = [-128.0, -128.0, 256, 256]
 snapshot = "{tmp_path / 'map.ot'}"
 snapshot_period = 2.0
-""" + SMALL_MISSION_NODES)
+""" + SMALL_MISSION_NODES.replace("[decide]\n", f'[decide]\nstate = "{tmp_path / "state"}"\n'))
     up, lines = start_up(mission, ep, tmp_path / "logs")
     client = None
     try:
@@ -87,6 +89,11 @@ snapshot_period = 2.0
         pid = int(re.findall(r"map-server\s+alive pid=(\d+)", "".join(lines))[-1])
         os.kill(pid, signal.SIGKILL)
         t_kill = layer_stamps[-1]  # layer sets carry the simulator's clock (the clouds' stamps)
+        decide_pid = int(re.findall(r"decide/uav1\s+alive pid=(\d+)", "".join(lines))[-1])
+        os.kill(decide_pid, signal.SIGKILL)  # uav1's decide node dies with it
+        heard_at_kill, seq_at_kill = len(waypoints), max(w.seq for w in waypoints)
+        saved = json.loads((tmp_path / "state" / "uav1.json").read_text())  # saved after every command
+        assert saved["seq"] >= seq_at_kill >= 3 and len(saved["ticks"]) >= 2 and saved["mission_id"]
         wait_for(lambda: re.search(r"map-server\s+alive pid=(?!%d)\d+ restarts=1" % pid, "".join(lines)), "restart")
         wait_for(lambda: (s := map_stats(client)) is not None, "the restarted map server")
         after = map_stats(client)
@@ -96,6 +103,14 @@ snapshot_period = 2.0
         wait_for(lambda: layer_stamps[-1] >= 60.0 and max(w.seq for w in waypoints) >= seq_at_restart + 2,
                  "60 mission seconds and two more waypoints after the restart", timeout=120)
         final = map_stats(client)
+        # the restarted decide node numbers on from its predecessor's state (a fresh one would send seq 1)
+        assert re.search(r"decide/uav1\s+alive pid=(?!%d)\d+ restarts=1" % decide_pid, "".join(lines))
+        after = {w.seq for w in waypoints[heard_at_kill:]}
+        assert min(after) >= seq_at_kill and saved["seq"] + 1 in after, (seq_at_kill, saved["seq"], after)
+        now = json.loads((tmp_path / "state" / "uav1.json").read_text())
+        assert now["mission_id"] == saved["mission_id"] and now["reached"] >= saved["reached"]
+        assert now["ticks"][:len(saved["ticks"])] == saved["ticks"] and len(now["ticks"]) > len(saved["ticks"])
+        assert "continuing (restarted) the survey saved at mission time" in (tmp_path / "logs" / "decide-uav1.log").read_text()
         assert 987654 not in {w.seq for w in waypoints}  # the hub never let the outsider's waypoint through
         assert final.leaves > before.leaves  # the map kept growing after the crash
         assert final.clouds_dropped == 0
