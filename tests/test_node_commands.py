@@ -17,6 +17,7 @@ from conftest import cli_process
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.cli import main as cli_main
 
 SMALL_SIM = "[sim]\nframe_rate_hz = 4.0\n[sim.world]\nsize = 100.0\n[sim.camera]\nwidth = 160\nheight = 120\n"
 
@@ -32,9 +33,11 @@ def mission(tmp_path: Path, text: str = SMALL_SIM) -> str:
 
 
 def test_sim_node_serves_mavlink_and_publishes_frames_for_the_given_mission_time(tmp_path):
+    """On a mission clock started at 100 s (a resumed survey): the vehicle's clock runs 0..3 s, the frames
+    and the status say 100..103 s."""
     ep = free_endpoint()
     with cli_process("sim", "--config", mission(tmp_path), "--endpoint", ep, "--mavlink", "tcp:127.0.0.1:0",
-                     "--duration", "3", "--speed", "1") as proc:
+                     "--duration", "3", "--speed", "1", "--clock-start", "100") as proc:
         ready = json.loads(proc.stdout.readline())
         assert ready["status"] == "ready" and ready["node"] == "sim" and ready["vehicle"] == "uav1"
         assert ready["mavlink"][0].startswith("tcp:127.0.0.1:0 -> 127.0.0.1:")
@@ -46,9 +49,17 @@ def test_sim_node_serves_mavlink_and_publishes_frames_for_the_given_mission_time
             out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     last = json.loads(out.strip().splitlines()[-1])
-    assert last["status"] == "stopped" and last["time"] == 3.0 and last["frames"] == 13  # t = 0, 0.25, ..., 3
+    assert last["status"] == "stopped" and last["time"] == 103.0 and last["frames"] == 13  # t = 0, 0.25, ..., 3
     assert frames, "no camera frame reached a peer on the bus"
+    stamps = [f.frame.stamp for f in frames]
+    assert stamps == sorted(stamps) and 100.0 <= stamps[0] and stamps[-1] == 103.0, stamps
     assert frames[-1].frame.image.shape == (120, 160, 3) and frames[-1].frame.depth.shape == (120, 160)
+
+
+def test_a_bad_clock_start_is_refused_naming_the_flag(tmp_path, capsys):
+    assert cli_main(["link", "--config", mission(tmp_path), "--endpoint", free_endpoint(),
+                     "--clock-start", "-5"]) == 2
+    assert "--clock-start: mission clock start: expected finite seconds >= 0, got -5.0" in capsys.readouterr().err
 
 
 def test_sim_node_rejects_a_bad_rate_naming_the_flag(tmp_path):
