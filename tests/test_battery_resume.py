@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import wait_for
-from test_link_flight import FAST, url_of
+from test_link_flight import url_of
 from test_link_reboot import flying_link_node
 from layerpilot.bus.keys import Keys
 from layerpilot.cli import main as cli_main
@@ -27,9 +27,7 @@ from layerpilot.bus.messages import (MissionState, State, decode_mission_state, 
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
 from layerpilot.eval.mission import run_mission
 from layerpilot.geometry import Pose
-from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
-from layerpilot.link.link import FlightLink
 from layerpilot.map import VoxelMap
 from layerpilot.mission import resume as survey
 from layerpilot.layers import compute_layers
@@ -49,41 +47,6 @@ from layerpilot.sim.vehicle import Multicopter
 def start_vehicle(battery: BatteryConfig, speed: float = 10.0) -> MavlinkVehicle:
     return MavlinkVehicle(Multicopter(position=(0.0, 0.0, 2.0), ground_z=2.0), "tcp:127.0.0.1:0",
                           EndpointConfig(battery=battery)).start(speed=speed)
-
-
-def test_the_simulated_battery_reports_as_arducopter_and_its_failsafe_rtls():
-    """100 mAh at 15 A: 24 s of flight; BATT_LOW_MAH 50 -> the autopilot's own RTL after 12 s armed
-    (no idle draw: what the ground wait costs depends on the machine's load)."""
-    vehicle = start_vehicle(BatteryConfig(capacity_mah=100.0, low_mah=50.0, idle_current_a=0.0))
-    gcs = open_connection(url_of(vehicle), 255, 190)
-    try:
-        with FlightLink(LinkConfig(url=url_of(vehicle), **FAST), clock=lambda: vehicle.time) as link:
-            link.connect(5.0)
-            link.wait_ready()
-            assert link.telemetry().battery_remaining == 100
-            link.start_guided()
-            link.arm()
-            link.takeoff(10.0)
-            wait_for(lambda: link.mode == "RTL", "the battery failsafe", timeout=20)
-            wait_for(lambda: "Battery 1 is low 15.00V used 50 mAh" in link._texts, "ArduCopter's failsafe text")
-            assert link.telemetry().battery_remaining <= 50     # SYS_STATUS: 50 mAh of 100 left, or less by now
-            # the autopilot's own failsafe, not a pilot: the text came just before the mode change
-            found = re.fullmatch(r"autopilot failsafe: battery \(Battery 1 is low 15\.00V used 50 mAh, (\d+)% "
-                                 r"left\): RTL", link.failsafe)
-            assert found and 42 <= int(found[1]) <= 50, link.failsafe  # 4 %/s: the charge at the mode's heartbeat
-            assert link.upsets[-1] == ("failsafe", link.failsafe) and link.failsafe in link.events
-            assert not any("took over" in e for e in link.events)
-        vehicle.pause_output()  # what was sent so far, and no more
-        statuses = []  # every BATTERY_STATUS the ground station got; the newest counts
-        while (m := gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=0.5)) is not None:
-            statuses.append(m)
-        status = statuses[-1]
-        assert statuses[0].current_battery == 0 and status.current_battery == 1500  # disarmed, then 15 A armed
-        assert 50 <= status.current_consumed <= 60                   # mAh, still drawing while it returns
-        assert status.voltages[0] == pytest.approx(1000 * (13.2 + 3.6 * status.battery_remaining / 100), abs=40)
-    finally:
-        gcs.close()
-        vehicle.stop()
 
 
 def test_the_pilot_turns_home_in_time_to_land_with_the_reserve():
@@ -233,10 +196,13 @@ def test_up_resume_without_a_saved_survey_says_so(tmp_path):
     assert cli_main(["up", "--mission", str(m), "--resume", "--log-dir", str(tmp_path / "logs")]) == 2
 
 
-def test_link_node_reports_the_autopilots_battery_failsafe_and_stamps_on_the_mission_clock():
-    """200 mAh at 15 A, BATT_LOW_MAH 100: the autopilot's own RTL 24 s after arming (2.4 s at 10x); the
-    node's poses are stamped 500 s (a resumed survey's saved time) + the autopilot's time_boot_ms."""
+def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_reports_it_as_such():
+    """200 mAh at 15 A: 48 s of flight; BATT_LOW_MAH 100 -> the autopilot's own RTL 24 s after arming (2.4 s
+    at 10x; no idle draw: what the ground wait costs depends on the machine's load). The link node was
+    given a mission clock started at 500 s (a resumed survey's saved time): its poses say 500 s + the
+    autopilot's time_boot_ms."""
     vehicle = start_vehicle(BatteryConfig(capacity_mah=200.0, low_mah=100.0, idle_current_a=0.0))
+    gcs = open_connection(url_of(vehicle), 255, 190)
     stamps: list[tuple[float, float]] = []  # (pose stamp, the vehicle's uptime when it arrived)
     try:
         with flying_link_node(vehicle, MissionClock(500.0), end_action="loiter") as (node, session):
@@ -244,14 +210,27 @@ def test_link_node_reports_the_autopilots_battery_failsafe_and_stamps_on_the_mis
                 (decode_state(s.payload.to_bytes()).stamp, vehicle.uptime)))
             wait_for(lambda: node.phase.startswith("returning home"), "the autopilot's failsafe", timeout=20)
             sub.undeclare()
+            vehicle.pause_output()  # what was sent so far, and no more
+            link = node.link
+            assert vehicle.mode == "RTL" and "Battery 1 is low 15.00V used 100 mAh" in link._texts  # ArduCopter's
+            # the autopilot's own failsafe, not a pilot: the text came just before the mode change
             found = re.fullmatch(r"returning home: autopilot failsafe: battery \(Battery 1 is low 15\.00V used "
                                  r"100 mAh, (\d+)% left\): RTL", node.phase)
             assert found and 46 <= int(found[1]) <= 50, node.phase  # 2 %/s: the charge at the mode's heartbeat
-            assert not any("took over" in e for e in node.link.events) and node.end == ""
+            assert link.upsets[-1] == ("failsafe", link.failsafe) and link.failsafe in link.events
+            assert not any("took over" in e for e in link.events) and node.end == ""
         assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the autopilot's return alone
         assert len(stamps) > 5 and all(500.0 < stamp <= 500.0 + uptime for stamp, uptime in stamps)
         assert all(500.0 + uptime - stamp < 2.0 for stamp, uptime in stamps[-3:])  # pose rate, mission s at 10x
+        statuses = []  # every BATTERY_STATUS the ground station got; the newest counts
+        while (m := gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=0.5)) is not None:
+            statuses.append(m)
+        status = statuses[-1]
+        assert statuses[0].current_battery == 0 and status.current_battery == 1500  # disarmed, then 15 A armed
+        assert 100 <= status.current_consumed <= 130                 # mAh, still drawing while it returns
+        assert status.voltages[0] == pytest.approx(1000 * (13.2 + 3.6 * status.battery_remaining / 100), abs=40)
     finally:
+        gcs.close()
         vehicle.stop()
 
 
