@@ -43,14 +43,23 @@ def wait(kind, condition=lambda m: True):
 
 
 def snapshot():
-    return {k: wait(k).to_dict() for k in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "HOME_POSITION",
-                                          "GPS_GLOBAL_ORIGIN", "EKF_STATUS_REPORT")}
+    # HOME_POSITION and GPS_GLOBAL_ORIGIN are in no stream: ArduCopter sends them when set and on request
+    for msg_id in (242, 49):
+        master.mav.command_long_send(master.target_system, master.target_component,
+                                     mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0, msg_id, 0, 0, 0, 0, 0, 0)
+    kinds = ["LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "HOME_POSITION", "GPS_GLOBAL_ORIGIN", "EKF_STATUS_REPORT"]
+    got = {}
+    while len(got) < len(kinds):
+        m = wait(kinds)
+        got[m.get_type()] = m.to_dict()
+    return got
 
 
+# ArduCopter streams nothing but HEARTBEAT until asked (its SRn_ rates default to 0 without MAVProxy)
+master.mav.request_data_stream_send(master.target_system, master.target_component,
+                                    mavutil.mavlink.MAV_DATA_STREAM_ALL, 10, 1)
 # wait for the EKF to use GPS (horizontal absolute position), as SITL scripts do
 wait("EKF_STATUS_REPORT", lambda m: m.flags & mavutil.mavlink.EKF_POS_HORIZ_ABS)
-master.mav.command_long_send(master.target_system, master.target_component,
-                             mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0, 242, 0, 0, 0, 0, 0, 0)
 ground = snapshot()
 master.set_mode("GUIDED")
 wait("HEARTBEAT", lambda m: m.custom_mode == 4)
