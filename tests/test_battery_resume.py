@@ -38,7 +38,7 @@ from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
 from layerpilot.mission.pilot import Pilot, PilotConfig, load_pilot_behavior
 from layerpilot.nodes.decide import DecideNode
-from layerpilot.nodes.up import up
+from layerpilot.nodes.up import node_commands, up
 from layerpilot.sim.battery import BatteryConfig
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
@@ -194,6 +194,24 @@ def test_up_resume_without_a_saved_survey_says_so(tmp_path):
         up(str(m), resume=True, log_dir=tmp_path / "logs")
     assert not (tmp_path / "logs").exists()  # nothing was started
     assert cli_main(["up", "--mission", str(m), "--resume", "--log-dir", str(tmp_path / "logs")]) == 2
+
+
+def test_up_resume_starts_the_sim_and_link_nodes_on_the_saved_mission_clock(tmp_path):
+    """What `up --resume` gives its nodes: the clock start read once from the saved states (the newest of
+    the vehicles'), and one mission id for every decide node (so that a restarted one continues)."""
+    mission = load_mission("default", [Override("--state", "decide.state", str(tmp_path / "state"))])
+    for vehicle, time in (("uav1", 38.5), ("uav2", 41.25)):
+        survey.save(build_pilot(mission), survey.state_file(tmp_path / "state", vehicle), time, time - 5.0)
+    start = survey.clock_after(tmp_path / "state", ["uav1", "uav2"]).start
+    nodes = {n.name: n.argv for n in node_commands(tmp_path / "m.toml", ["uav1", "uav2"], None, resume=True,
+                                                    clock_start=start, mission_id="run7")}
+    assert start == 41.25
+    for v in ("uav1", "uav2"):
+        assert nodes[f"sim/{v}"][-2:] == nodes[f"link/{v}"][-2:] == ["--clock-start", "41.25"]
+        assert nodes[f"decide/{v}"][-3:] == ["--mission-id", "run7", "--resume"]
+    (tmp_path / "state" / "uav2.json").write_text('{"time": "soon"}')
+    with pytest.raises(ValueError, match="uav2.json: damaged mission state: ValueError"):
+        survey.clock_after(tmp_path / "state", ["uav1", "uav2"])
 
 
 def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_reports_it_as_such():
