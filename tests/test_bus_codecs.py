@@ -37,6 +37,24 @@ def test_keys():
         Keys("a/b")
     with pytest.raises(ValueError, match="topic"):
         k.topic("nope")
+    assert k.health("map-server") == "layerpilot/uav1/health/map-server"
+    assert k.aggregates == "layerpilot/uav1/decide/aggregates"
+    with pytest.raises(ValueError, match="unknown node 'view'"):
+        k.health("view")
+
+
+def test_health_round_trip_and_rejections():
+    status = {"received": 12, "dropped": 1, "loops": {"map-insert": 0.2}, "telemetry": "GUIDED armed"}
+    h = msg.decode_health(msg.encode_health(msg.NodeHealth("uav1", "map-server", 12.5, status)))
+    assert h == msg.NodeHealth("uav1", "map-server", 12.5, status)
+    with pytest.raises(ValueError, match="Out of range float values"):  # NaN is not JSON: refused at the sender
+        msg.encode_health(msg.NodeHealth("uav1", "decide", 1.0, {"x": math.nan}))
+    for m, reason in ((pb.NodeHealth(vehicle="uav1", node="decide", status="{oops"), "not JSON"),
+                      (pb.NodeHealth(vehicle="uav1", node="decide", status="[1, 2]"), "a JSON object expected"),
+                      (pb.NodeHealth(vehicle="uav1", node="router", status="{}"), "'router' is not one of"),
+                      (pb.NodeHealth(vehicle="uav1", node="decide", uptime=math.inf, status="{}"), "uptime")):
+        with pytest.raises(BadMessage, match=reason):
+            msg.decode_health(m.SerializeToString())
 
 
 def test_cloud_round_trip():

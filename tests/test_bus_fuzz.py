@@ -32,6 +32,7 @@ GOOD = {
     msg.decode_waypoint: msg.encode_waypoint(msg.Waypoint(1.0, "uav1", 1, np.ones(3))),
     msg.decode_decision: msg.encode_decision(msg.Decision(1.0, "uav1", 1, np.ones(3), 0.5, (msg.Term("a", 1, 1, 1),))),
     msg.decode_mission_state: msg.encode_mission_state(msg.MissionState(1.0, "uav1", "survey")),
+    msg.decode_health: msg.encode_health(msg.NodeHealth("uav1", "link", 3.5, {"poses": 7, "phase": "flying"})),
     decode_layer_set: encode_layer_set(GridLayersMessage(1.0, "uav1", GridGeometry(0, 0, 1, 16, 8), {
         "observed": rng.random((8, 16)) > 0.5, "elevation": rng.random((8, 16)).astype(np.float32),
         "last_seen": rng.random((8, 16)), "color": rng.integers(0, 256, (8, 16, 3), dtype=np.uint8)})),

@@ -24,7 +24,7 @@ K = Keys("uav1")
 
 
 def bus_messages(n: int) -> list[tuple[str, bytes]]:
-    """Poses, clouds and decisions of one vehicle, as the nodes encode them."""
+    """Poses, clouds, decisions and the decide node's health of one vehicle, as the nodes encode them."""
     rng = np.random.default_rng(0)
     out = []
     for i in range(n):
@@ -35,6 +35,9 @@ def bus_messages(n: int) -> list[tuple[str, bytes]]:
             out.append((K.decision, msg.encode_decision(msg.Decision(0.1 * i, "uav1", i, np.array([i, 1.0, 30.0]),
                                                                      0.5, (), "balanced", np.array([0.0, 2, 30]),
                                                                      f"choice {i}"))))
+        if i % 10 == 0:
+            out.append((K.health("decide"), msg.encode_health(msg.NodeHealth(
+                "uav1", "decide", 0.2 * i, {"decisions": i // 5, "rejected": 0, "loops": {"decide": 0.1}}))))
     return out
 
 
@@ -52,7 +55,8 @@ def recorded(tmp_path_factory):
         for key, payload in sent:
             publish(nodes, key, payload)
         publish(nodes, "layerpilot/uav1/unknown", b"\x08\x01")  # not one of ours: rejected, not recorded
-        wait_for(lambda: sum(recorder.writer.written.values()) + recorder.writer.rejects.total >= len(sent) + 1,
+        publish(nodes, "layerpilot/uav1/health/nobody", sent[-1][1])  # no such node: rejected too
+        wait_for(lambda: sum(recorder.writer.written.values()) + recorder.writer.rejects.total >= len(sent) + 2,
                  "every message at the recorder", timeout=60.0)
         summary = recorder.stop()
     return path, sent, summary
@@ -66,8 +70,11 @@ def test_recording_holds_every_published_message_per_key(recorded):
     assert Counter(k for k, _, _ in got) == Counter(k for k, _ in sent) == Counter(summary["messages"])
     assert [(k, d) for k, d, _ in got] == sent  # in the order published, byte for byte
     assert {k: s for k, _, s in got} == {K.pose: "layerpilot.VehicleState", K.cloud: "layerpilot.PointCloud",
-                                         K.decision: "layerpilot.Decision"}
-    assert summary["rejected"] == 1 and summary["dropped"] == 0
+                                         K.decision: "layerpilot.Decision", K.health("decide"): "layerpilot.NodeHealth"}
+    assert summary["rejected"] == 2 and summary["dropped"] == 0
+    health = [msg.decode_health(d) for k, d, _ in got if k == K.health("decide")]
+    assert len(health) == 15 and health[3].status == {"decisions": 6, "rejected": 0, "loops": {"decide": 0.1}}
+    assert health[3].uptime == pytest.approx(6.0) and health[3].node == "decide"
     decisions = [msg.decode_decision(d) for k, d, _ in got if k == K.decision]
     assert decisions[2].explanation == "choice 10" and decisions[2].runner_up.tolist() == [0.0, 2.0, 30.0]
 

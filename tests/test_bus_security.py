@@ -204,16 +204,19 @@ def test_access_control_is_an_allow_list():
     assert {r["permission"] for r in acl["rules"]} == {"allow"}
     pub = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["messages"] == ["put"] and r["flows"] == ["ingress"]}
     assert pub["decide-uav1/publish"] == ["layerpilot/uav1/waypoint", "layerpilot/uav1/decision",
-                                          "layerpilot/uav1/state"]
-    assert pub["link-uav1/publish"] == ["layerpilot/uav1/pose"]
-    assert pub["depth-uav1/publish"] == ["layerpilot/uav1/cloud"]
-    assert pub["sim-uav1/publish"] == ["layerpilot/uav1/camera"]
-    assert pub["map-server/publish"] == ["layerpilot/uav1/layers"]
+                                          "layerpilot/uav1/state", "layerpilot/uav1/health/decide"]
+    assert pub["link-uav1/publish"] == ["layerpilot/uav1/pose", "layerpilot/uav1/health/link"]
+    assert pub["depth-uav1/publish"] == ["layerpilot/uav1/cloud", "layerpilot/uav1/health/depth"]
+    assert pub["sim-uav1/publish"] == ["layerpilot/uav1/camera", "layerpilot/uav1/health/sim"]
+    assert pub["map-server/publish"] == ["layerpilot/uav1/layers", "layerpilot/uav1/health/map-server"]
     assert "operator/publish" not in pub
     queries = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["messages"] == ["query"] and r["flows"] == ["ingress"]}
     assert queries == {"decide-uav1/query": ["layerpilot/uav1/map/layers"],
                        "operator/query": ["layerpilot/*/map/stats", "layerpilot/*/map/layers",
-                                          "layerpilot/*/map/voxels"]}
+                                          "layerpilot/*/map/voxels", "layerpilot/*/decide/aggregates"]}
+    answers = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["messages"] == ["declare_queryable", "reply"]}
+    assert answers["decide-uav1/answer"] == ["layerpilot/uav1/decide/aggregates"]  # its own vehicle's only
+    assert set(answers) == {"decide-uav1/answer", "map-server/answer"}
 
 
 # --- mutual TLS ---------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
 from layerpilot.mission.config import Mission
 from layerpilot.mission.pilot import PilotConfig
-from layerpilot.nodes.decide import DecideNode
+from layerpilot.nodes.decide import DecideNode, decode_aggregates
 from conftest import wait_for
 
 
@@ -53,6 +53,8 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
     try:
         time.sleep(0.5)
         k1, k2 = Keys("uav1"), Keys("uav2")
+        before = list(world.get(k1.aggregates, timeout=5.0))  # nothing ticked yet: an error reply, not silence
+        assert len(before) == 1 and "no decision tick yet" in before[0].err.payload.to_string()
         world.put(k1.layers, layer_payload("uav1"))
         world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
         wait_for(lambda: len(got["uav1"]) >= 1, "uav1's first waypoint")
@@ -63,6 +65,7 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         names = [t.name for t in d1.terms]
         assert {"fringe", "time", "distance", "zone", "preference", "history"} <= set(names)
         assert d1.score > 0 and d1.behavior == "balanced"
+        assert_aggregates_of_the_tick(world, nodes[0], w1, d1)
 
         # same map, same place, same behavior: uav2 would pick uav1's cell, but must stay r_e away
         wait_for(lambda: "uav1" in nodes[1]._others, "uav2 hearing uav1's target")
@@ -89,6 +92,26 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
             n.stop()
         for s in subs:
             s.undeclare()
+
+
+def assert_aggregates_of_the_tick(world, node: DecideNode, w: msg.Waypoint, d: msg.Decision) -> None:
+    """Asked on the bus, the decide node answers A0..A3 of the tick that chose ``w``: on its window (r_i
+    around the drone, not the whole 256 m grid), placed in the map frame, the chosen cell scoring ``d.score``."""
+    replies = list(world.get(Keys("uav1").aggregates, timeout=5.0))
+    assert len(replies) == 1 and replies[0].ok is not None
+    ls = decode_aggregates(replies[0].ok.payload.to_bytes(), "uav1")
+    tick, r_i = node.pilot.maker.last_tick, node.pilot.behavior.r_i
+    g = ls.geometry
+    assert g == tick.placement and g.resolution == 1.0
+    assert g.width < 256 and g.height < 256 and abs(g.width - (2 * r_i + 3)) <= 1  # the window, one cell of slack
+    assert g.origin_x == pytest.approx(-r_i - 1.5, abs=1.0) and g.origin_y == pytest.approx(-r_i - 1.5, abs=1.0)
+    for name, exact in tick.aggregates().items():
+        np.testing.assert_allclose(ls.layers[name], exact, rtol=1e-3, atol=1e-4)  # float16 on the wire
+    np.testing.assert_allclose(ls.layers["A2"], tick.a1 * tick.p, rtol=1e-3, atol=1e-4)
+    row, col = g.cell_of(*w.position[:2])
+    assert ls.layers["A3"][row, col] == pytest.approx(d.score, rel=1e-3)
+    assert ls.layers["A3"][row, col] >= ls.layers["A3"].max() - node.pilot.behavior.noise - 1e-3
+    assert ls.stamp == d.stamp and node.aggregates_answered == 1
 
 
 def wide_payload(vehicle: str, half: float, stamp: float) -> bytes:

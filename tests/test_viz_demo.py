@@ -35,6 +35,9 @@ def test_demo_run_saves_an_rrd_with_the_mission_entities(tmp_path):
     decisions = (run / "decisions.jsonl").read_text().splitlines()
     assert rows["/decision"] == rows["/world/target"] == len(decisions) > 0  # one explanation per command
     assert rows["/world/drone"] == json.loads((run / "metrics.json").read_text())["settings"]["frames"]
+    chosen = sum("explanation" in json.loads(d) for d in decisions)  # the maker's (not the way home's)
+    for name in ("A0", "A1", "A2", "A3"):  # each tick's aggregates, placed on the layers: transform + image
+        assert rows[f"/layers/{name}"] == 2 * chosen > 0, name
 
 
 def test_nodes_and_evaluator_do_not_load_rerun_unless_asked():

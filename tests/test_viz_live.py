@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
+from rerun.chunk import RrdReader
 
 from layerpilot.bus.session import free_endpoint
 from layerpilot.eval.replay import replay
@@ -23,7 +24,8 @@ from conftest import SMALL_MISSION_NODES, cli_process, free_tcp_port, start_up, 
 
 SCHEMAS = {"camera": "layerpilot.CameraFrame", "cloud": "layerpilot.PointCloud", "pose": "layerpilot.VehicleState",
            "layers": "layerpilot.LayerSet", "decision": "layerpilot.Decision", "waypoint": "layerpilot.Waypoint",
-           "state": "layerpilot.MissionState"}
+           "state": "layerpilot.MissionState",
+           **{f"health/{n}": "layerpilot.NodeHealth" for n in ("sim", "link", "depth", "decide", "map-server")}}
 
 
 def scene_pixels(png: bytes) -> tuple[int, int]:
@@ -95,6 +97,28 @@ def test_web_viewer_shows_the_mission_in_a_real_browser(live):
     for topic in ("pose", "camera", "layers", "decision"):
         assert heard[topic] > 0 and logged[topic] > 0, topic
     assert logged["voxels"] > 0
+
+
+def test_view_shows_every_nodes_health_and_the_decisions_aggregate_layers(live):
+    """Through the hub's allow-list as the operator: each node's health key, and A0..A3 asked of the decide
+    node, are in the view (its .rrd): rates, drops and rejections per node, the aggregates over the layers."""
+    logged = live["view"]["logged"]
+    nodes = ("sim", "link", "depth", "decide", "map-server")
+    assert all(logged[f"health/{n}"] >= 2 for n in nodes), logged
+    assert logged["aggregates"] >= 1
+    rows: Counter[str] = Counter()
+    for chunk in RrdReader(live["dir"] / "view.rrd").stream():
+        rows[chunk.entity_path] += chunk.num_rows
+    series = ["/health/map-server/dropped", "/health/map-server/rate/inserted", "/health/depth/rate/clouds",
+              "/health/decide/rate/decisions", "/health/link/rate/poses", "/health/sim/rate/frames",
+              "/health/decide/loops/decide", "/health/decide/inputs/pose"]
+    series += [f"/health/{n}/rejected" for n in nodes if n != "sim"] + [f"/layers/A{i}" for i in range(4)]
+    assert not [e for e in series if rows[e] == 0], sorted(e for e in rows if e.startswith(("/health", "/layers")))
+    with open(live["dir"] / "mission.mcap", "rb") as f:  # `up --record` holds the nodes' health too
+        decide = [json.loads(decoded.status) for _, _, _, decoded in make_reader(
+            f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["layerpilot/uav1/health/decide"])]
+    assert len(decide) >= 2 and decide[-1]["decisions"] >= 1
+    assert decide[-1]["aggregates_asked"] >= logged["aggregates"]  # answered to the view's questions
 
 
 def test_recording_is_read_back_by_the_mcap_library(live):

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 PREFIX = "layerpilot"
 TOPICS = ("camera", "cloud", "pose", "layers", "decision", "waypoint", "state")
 SERVICES = ("layers", "stats", "save", "voxels")
+NODES = ("sim", "link", "depth", "decide", "map-server")  # whose status goes out on health/<node>
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 
 
@@ -36,6 +37,17 @@ class Keys:
         if name not in SERVICES:
             raise ValueError(f"service: unknown {name!r}; known: {', '.join(SERVICES)}")
         return f"{PREFIX}/{self.vehicle}/map/{name}"
+
+    def health(self, node: str) -> str:
+        """A node's periodic status (``layerpilot/uav1/health/decide``); the map server has one per vehicle."""
+        if node not in NODES:
+            raise ValueError(f"health: unknown node {node!r}; known: {', '.join(NODES)}")
+        return f"{PREFIX}/{self.vehicle}/health/{node}"
+
+    @property
+    def aggregates(self) -> str:
+        """The decide node's queryable: A0..A3 of its last tick (asked by a viewer; nothing is sent otherwise)."""
+        return f"{PREFIX}/{self.vehicle}/decide/aggregates"
 
     camera = property(lambda self: self.topic("camera"))
     cloud = property(lambda self: self.topic("cloud"))

@@ -8,6 +8,7 @@ adds the envelope the bus needs (vehicle, sequence number, ...).
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -15,7 +16,7 @@ import numpy as np
 from google.protobuf.message import DecodeError, Message
 
 from layerpilot.bus import arrays, limits
-from layerpilot.bus.keys import check_vehicle
+from layerpilot.bus.keys import NODES, check_vehicle
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
@@ -308,3 +309,40 @@ def decode_mission_state(payload: bytes) -> MissionState:
         raise BadMessage("not finite", "target: inf")
     return MissionState(_finite(m.stamp, "stamp"), _vehicle(m), m.phase, m.waypoints_sent, m.waypoints_reached,
                         _finite(m.distance_flown, "distance_flown"), target)
+
+
+# --- node health ----------------------------------------------------------------------------
+
+MAX_HEALTH_BYTES = 64 << 10  # a status line is a few hundred bytes; more is not a status line
+
+
+@dataclass(frozen=True)
+class NodeHealth:
+    """A node's status line on the bus: the same dict its JSON status line prints, for the view and recordings."""
+
+    vehicle: str
+    node: str  # keys.NODES
+    uptime: float  # s since the node started (monotonic): counter differences over it are rates
+    status: dict
+
+
+def encode_health(h: NodeHealth) -> bytes:
+    if h.node not in NODES:
+        raise ValueError(f"health: unknown node {h.node!r}; known: {', '.join(NODES)}")
+    return pb.NodeHealth(vehicle=check_vehicle(h.vehicle), node=h.node, uptime=float(h.uptime),
+                         status=json.dumps(h.status, allow_nan=False)).SerializeToString()
+
+
+def decode_health(payload: bytes) -> NodeHealth:
+    m = parse(pb.NodeHealth, payload)
+    if m.node not in NODES:
+        raise BadMessage("unknown node", f"node: {m.node!r} is not one of {', '.join(NODES)}")
+    if len(m.status) > MAX_HEALTH_BYTES:
+        raise BadMessage("too large", f"status: {len(m.status)} characters is more than {MAX_HEALTH_BYTES}")
+    try:
+        status = json.loads(m.status)
+    except ValueError as exc:
+        raise BadMessage("bad status", f"status: not JSON ({exc})") from None
+    if not isinstance(status, dict):
+        raise BadMessage("bad status", f"status: a JSON object expected, got {type(status).__name__}")
+    return NodeHealth(_vehicle(m), m.node, _finite(m.uptime, "uptime"), status)

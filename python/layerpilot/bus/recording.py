@@ -36,7 +36,8 @@ from layerpilot.bus.reject import BadMessage, Rejects
 
 _log = logging.getLogger("layerpilot.recording")
 SCHEMAS = {"camera": pb.CameraFrame, "cloud": pb.PointCloud, "pose": pb.VehicleState, "layers": pb.LayerSet,
-           "decision": pb.Decision, "waypoint": pb.Waypoint, "state": pb.MissionState}
+           "decision": pb.Decision, "waypoint": pb.Waypoint, "state": pb.MissionState,
+           "health": pb.NodeHealth}  # health: layerpilot/<vehicle>/health/<node>
 KNOWN_SCHEMAS = {cls.DESCRIPTOR.full_name for cls in SCHEMAS.values()}
 METADATA = "layerpilot"
 CHUNK_SIZE = 256 << 10  # bytes: a crash loses at most the last chunk
@@ -44,10 +45,13 @@ MAX_QUEUED_BYTES = 512 << 20  # payload bytes waiting for the writer; beyond, ne
 
 
 def topic_of(key: str) -> str:
-    """The topic of a concrete key ``layerpilot/<vehicle>/<topic>`` (BadMessage when it is none of ours)."""
+    """The topic of a concrete key ``layerpilot/<vehicle>/<topic>`` or ``layerpilot/<vehicle>/health/<node>``
+    (BadMessage when it is none of ours)."""
     parts = key.split("/")
-    if len(parts) != 3 or parts[0] != keys.PREFIX or parts[2] not in SCHEMAS:
-        raise BadMessage("unknown key", f"{key!r} is not layerpilot/<vehicle>/<{'|'.join(SCHEMAS)}>")
+    health = len(parts) == 4 and parts[2] == "health" and parts[3] in keys.NODES
+    if parts[0] != keys.PREFIX or not (health or (len(parts) == 3 and parts[2] in keys.TOPICS)):
+        raise BadMessage("unknown key", f"{key!r} is not layerpilot/<vehicle>/<{'|'.join(keys.TOPICS)}> "
+                                        f"or layerpilot/<vehicle>/health/<{'|'.join(keys.NODES)}>")
     keys.check_vehicle(parts[1])
     return parts[2]
 

@@ -64,19 +64,22 @@ def node_user(role: str, vehicle: str | None = None) -> str:
 def grants(vehicles: list[str], operator_can_save: bool = False) -> dict[str, Grant]:
     """Every user of a mission and what it may do (the one place that says who talks to whom)."""
     services = tuple(f"{keys.PREFIX}/*/map/{name}" for name in keys.SERVICES)
-    out = {MAP_SERVER: Grant(publish=tuple(keys.Keys(v).layers for v in vehicles),
-                             subscribe=(keys.all_vehicles("cloud"),), answer=services)}
-    for v in vehicles:
+    out = {MAP_SERVER: Grant(publish=tuple(key for v in vehicles for key in (keys.Keys(v).layers,
+                                                                             keys.Keys(v).health(MAP_SERVER))),
+                             subscribe=(keys.all_vehicles("cloud"), keys.all_vehicles("pose")), answer=services)}
+    for v in vehicles:  # every node also puts its own health key, nothing else of another node's
         k = keys.Keys(v)
-        out[node_user("sim", v)] = Grant(publish=(k.camera,), subscribe=(k.pose,))  # pose: camera-only mode
-        out[node_user("link", v)] = Grant(publish=(k.pose,), subscribe=(k.waypoint, k.state))  # state: battery RTL
-        out[node_user("depth", v)] = Grant(publish=(k.cloud,), subscribe=(k.camera,))
-        out[node_user("decide", v)] = Grant(publish=(k.waypoint, k.decision, k.state),
+        out[node_user("sim", v)] = Grant(publish=(k.camera, k.health("sim")), subscribe=(k.pose,))  # pose: camera-only
+        out[node_user("link", v)] = Grant(publish=(k.pose, k.health("link")),
+                                          subscribe=(k.waypoint, k.state))  # state: battery RTL
+        out[node_user("depth", v)] = Grant(publish=(k.cloud, k.health("depth")), subscribe=(k.camera,))
+        out[node_user("decide", v)] = Grant(publish=(k.waypoint, k.decision, k.state, k.health("decide")),
                                             subscribe=(k.layers, k.pose, keys.all_vehicles("decision")),
-                                            query=(k.service("layers"),))
+                                            query=(k.service("layers"),), answer=(k.aggregates,))
     allowed = OPERATOR_QUERIES + (("save",) if operator_can_save else ())
-    out[OPERATOR] = Grant(subscribe=(f"{keys.PREFIX}/**",),
-                          query=tuple(f"{keys.PREFIX}/*/map/{name}" for name in allowed))
+    out[OPERATOR] = Grant(subscribe=(f"{keys.PREFIX}/**",),  # every topic and every node's health
+                          query=tuple(f"{keys.PREFIX}/*/map/{name}" for name in allowed)
+                          + (f"{keys.PREFIX}/*/decide/aggregates",))
     return out
 
 

@@ -7,7 +7,8 @@ with actions of their own (`layerpilot sim preview`, `layerpilot link takeoff 20
 config/missions/), prints one JSON line when ready (a node that connects to something first,
 the link, prints ``"status": "connecting"`` and then ``"ready"`` once connected; a refused
 connection ends in ``"status": "failed"`` with the error, exit 1) and a JSON status line every
-``--status-every`` seconds, and on SIGTERM/SIGINT finishes its current message, prints a
+``--status-every`` seconds (the same dict goes on the bus, ``layerpilot/<vehicle>/health/<node>``,
+for `layerpilot view` and recordings), and on SIGTERM/SIGINT finishes its current message, prints a
 last status line and exits 0.
 """
 
@@ -132,8 +133,11 @@ def _say(**fields: Any) -> None:
 
 
 def _run_node(args: argparse.Namespace) -> int:
+    import logging
+
     from layerpilot.bus.security import open_node_session
     from layerpilot.nodes.runner import bus_config, stop_event, wait_for_stop
+    from layerpilot.nodes.supervise import HealthPublisher
 
     mission = mission_from_args(args, args.mission_flags)
     vehicle = args.vehicle or mission.vehicles[0]
@@ -144,10 +148,13 @@ def _run_node(args: argparse.Namespace) -> int:
     try:
         node = args.build(args, mission, vehicle, session)
         status = _with_health(node)
+        health = HealthPublisher(session, args.role, mission.vehicles if args.role == "map-server" else [vehicle],
+                                 logging.getLogger(f"layerpilot.{args.role}"))
         _say(node=args.role, vehicle=vehicle, status="ready" if node.ready is None else "connecting", **node.info)
         announcer = threading.Thread(target=_announce_ready, args=(node, stop, args.role, vehicle), daemon=True)
         announcer.start()
-        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, status), daemon=True)
+        ticker = threading.Thread(target=_status_loop, args=(stop, args, vehicle, status, health),
+                                  daemon=True)
         ticker.start()
         if node.supervisor is not None:
             threading.Thread(target=_watch, args=(node.supervisor, stop), daemon=True).start()
@@ -157,8 +164,10 @@ def _run_node(args: argparse.Namespace) -> int:
         announcer.join()
         node.stop()
         failure = node.supervisor.failure if node.supervisor is not None else ""
+        last = status()
         _say(node=args.role, vehicle=vehicle, status="failed" if failure else "stopped",
-             **({"error": failure} if failure else {}), **status())
+             **({"error": failure} if failure else {}), **last)
+        health.publish(last)
     finally:
         session.close()
     return 1 if failure else 0
@@ -192,9 +201,13 @@ def _watch(supervisor, stop: threading.Event) -> None:
             stop.set()
 
 
-def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, status: Callable[[], dict]) -> None:
+def _status_loop(stop: threading.Event, args: argparse.Namespace, vehicle: str, status: Callable[[], dict],
+                 health) -> None:
+    """The status line on stdout and, the same dict, on the node's health key (a HealthPublisher)."""
     while not stop.wait(args.status_every):
-        _say(node=args.role, vehicle=vehicle, **status())
+        now = status()
+        _say(node=args.role, vehicle=vehicle, **now)
+        health.publish(now)
 
 
 def _map_server(args, mission, vehicle, session) -> Running:
@@ -216,7 +229,8 @@ def _decide(args, mission, vehicle, session) -> Running:
     node = DecideNode(session, vehicle, mission, resume=args.resume, mission_id=args.mission_id)
     node.start()
     return Running(lambda: {"decisions": node.seq, "reached": node.reached,
-                            "distance": round(node.distance_flown, 1), "rejected": node.rejects.total},
+                            "distance": round(node.distance_flown, 1), "rejected": node.rejects.total,
+                            "aggregates_asked": node.aggregates_answered},
                    node.stop, {"behavior": mission.decide.behavior}, supervisor=node.supervisor)
 
 

@@ -60,6 +60,7 @@ class _Scores:
     grid: _Grid
     window: GridWindow
     position: Sequence[float]
+    time: float
     avoid: Sequence[Sequence[float]]
     weights: dict[str, float]
     coverage: float
@@ -73,6 +74,35 @@ class _Scores:
 
     def at(self, arr: np.ndarray, cell: tuple[int, int]) -> float:
         return float(arr[cell[0] - self.window.row0, cell[1] - self.window.col0])
+
+
+@dataclass(frozen=True)
+class TickTerms:
+    """The aggregate layers of one tick, as it computed them on its window (kept by reference: free).
+
+    ``placement`` is the window's own grid in the map frame (None: the window was empty, the
+    drone beyond the grid). A2 = A1 * P is only multiplied out when asked (``aggregates``, a
+    viewer); A3 is the score the choice maximised, other drones' targets masked.
+    """
+
+    time: float
+    placement: GridGeometry | None
+    a0: np.ndarray
+    a1: np.ndarray
+    p: np.ndarray
+    a3: np.ndarray
+
+    @classmethod
+    def of(cls, s: _Scores) -> "TickTerms":
+        g, w = s.grid.geometry, s.window
+        placement = None if w.empty else GridGeometry(g.origin_x + w.col0 * g.resolution,
+                                                      g.origin_y + w.row0 * g.resolution, g.resolution,
+                                                      w.col1 - w.col0, w.row1 - w.row0)
+        return cls(float(s.time), placement, s.a0, s.a1, s.p, s.a3)
+
+    def aggregates(self) -> dict[str, np.ndarray]:
+        """A0 (weighted layers), A1 (x Z), A2 (x P), A3 (x H): arrays of the window's shape."""
+        return {"A0": self.a0, "A1": self.a1, "A2": self.a1 * self.p, "A3": self.a3}
 
 
 class DecisionMaker:
@@ -94,6 +124,7 @@ class DecisionMaker:
         self._switched_at = -np.inf
         self._grid_cache: _Grid | None = None
         self._widen: Callable[[GridWindow], LayerSet] | None = None
+        self.last_tick: TickTerms | None = None  # the terms of the last decide or reconsider, for a viewer
 
     def decide(
         self,
@@ -112,6 +143,7 @@ class DecisionMaker:
         alone: the "approach" fallback may head for a cell beyond r_i and explains it.
         """
         scores = self._evaluate(layers, position, time, tick=True, avoid=avoid)
+        self.last_tick = TickTerms.of(scores)
         self._widen = widen
         try:
             decision = self._choose(scores, position, time, intermediates)
@@ -135,6 +167,7 @@ class DecisionMaker:
         if not rt.enabled or self.target is None or time - self._switched_at < rt.min_interval:
             return None
         scores = self._evaluate(layers, position, time, tick=False, avoid=avoid)
+        self.last_tick = TickTerms.of(scores)
         best = self._pick(scores.a3, scores.window)
         if best is None:
             return None
@@ -209,7 +242,7 @@ class DecisionMaker:
         allowed = self._allowed(grid, avoid, win)
         if allowed is not None:
             a3 *= allowed
-        return _Scores(layers, grid, win, position, avoid, weights, coverage, a0, a1, p, h, a3, allowed, d)
+        return _Scores(layers, grid, win, position, time, avoid, weights, coverage, a0, a1, p, h, a3, allowed, d)
 
     def _allowed(self, grid: _Grid, avoid: Sequence[Sequence[float]], window: GridWindow) -> np.ndarray | None:
         """False within r_e of any ``avoid`` point (None when there are none)."""

@@ -6,6 +6,11 @@ callbacks keep the newest layer set and pose; one worker steps the pilot on ever
 input, stamped with the pose's mission clock. Other vehicles' current targets, heard on
 ``layerpilot/*/decision``, are points to avoid. The current waypoint is re-sent every
 second, so a link that (re)starts later still gets it.
+
+The decision's aggregate layers A0..A3 are offered, not sent: a queryable on
+``layerpilot/<vehicle>/decide/aggregates`` answers with those of the last tick, on the window
+the tick computed (its grid is that window's placement in the map frame). The worker only
+keeps a reference to the tick's arrays; nothing is multiplied out or encoded unless a viewer asks.
 """
 
 from __future__ import annotations
@@ -22,11 +27,12 @@ import zenoh
 from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
 from layerpilot.bus.layerset import GridLayersMessage
-from layerpilot.bus.layerset import decode_layer_set, to_column_layers
+from layerpilot.bus.layerset import decode_layer_set, encode_layer_set, to_column_layers
 from layerpilot.bus.messages import (Decision, MissionState, State, Term, Waypoint, decode_decision, decode_state,
                                      encode_decision, encode_mission_state, encode_waypoint)
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
+from layerpilot.decide.maker import TickTerms
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
 from layerpilot.mission.build import build_pilot
@@ -38,6 +44,24 @@ from layerpilot.nodes.supervise import Supervisor
 _log = logging.getLogger("layerpilot.decide")
 REPEAT_PERIOD = 1.0  # s: the current waypoint is re-sent this often until reached
 INPUT_ERRORS = (ValueError, ArithmeticError)  # what a layer set or pose can provoke in the pilot: that input's fault
+AGGREGATES = ("A0", "A1", "A2", "A3")
+
+
+def encode_aggregates(tick: TickTerms, vehicle: str) -> bytes:
+    """A tick's A0..A3 as a layer set whose grid is the tick's window (float16): the ``decide/aggregates``
+    reply, and what the lock-step evaluator gives its view."""
+    if tick.placement is None:
+        raise ValueError("aggregates: the tick's window was empty (the drone was beyond the layers' grid)")
+    return encode_layer_set(GridLayersMessage(tick.time, vehicle, tick.placement, tick.aggregates()),
+                            dict.fromkeys(AGGREGATES, "float16"))
+
+
+def decode_aggregates(payload: bytes, vehicle: str) -> GridLayersMessage:
+    """A ``decide/aggregates`` reply: A0..A3 of ``vehicle`` and nothing else (BadMessage names what is wrong)."""
+    ls = decode_layer_set(payload)
+    if ls.vehicle != vehicle or sorted(ls.layers) != list(AGGREGATES):
+        raise BadMessage("bad aggregates", f"expected A0..A3 of {vehicle}, got {sorted(ls.layers)} of {ls.vehicle}")
+    return ls
 
 
 def decision_message(command: Command, vehicle: str, behavior: str) -> Decision:
@@ -90,6 +114,9 @@ class DecideNode:
         self._waypoint_msg: bytes | None = None
         self._state_msg: bytes | None = None
         self._sent_at = 0.0
+        self._tick: TickTerms | None = None  # the last tick's terms (by reference), for decide/aggregates
+        self._tick_reply: tuple[TickTerms, bytes] | None = None  # encoded once per tick, when asked
+        self.aggregates_answered = 0
 
     @property
     def seq(self) -> int:
@@ -105,6 +132,7 @@ class DecideNode:
             s.declare_subscriber(k.layers, guarded(decode_layer_set, self._on_layers, r, sv)),
             s.declare_subscriber(k.pose, guarded(decode_state, self._on_state, r, sv)),
             s.declare_subscriber(keys.all_vehicles("decision"), guarded(decode_decision, self._on_other, r, sv)),
+            s.declare_queryable(k.aggregates, self._on_aggregates),
         ]
         self.supervisor.start("decide", self._iteration)
 
@@ -183,9 +211,32 @@ class DecideNode:
                 if self._columns is columns:
                     self._columns = None
             return True
+        if self.pilot.maker is not None:
+            with self._cond:
+                self._tick = self.pilot.maker.last_tick
         if command is not None:
             self._publish(command, state)
         return True
+
+    def _on_aggregates(self, query: zenoh.Query) -> None:
+        """A viewer asks for the last tick's A0..A3 (Zenoh's thread: one encoding per tick, a few ms)."""
+        try:
+            with self._cond:
+                tick, reply = self._tick, self._tick_reply
+            if tick is None:
+                query.reply_err(b"no decision tick yet (or the behavior is a scripted pattern)")
+                return
+            if reply is None or reply[0] is not tick:
+                reply = (tick, encode_aggregates(tick, self.keys.vehicle))
+                with self._cond:
+                    self._tick_reply = reply
+            query.reply(self.keys.aggregates, reply[1])
+            self.aggregates_answered += 1
+        except Exception as exc:  # every query gets an answer; the first failure of a kind is logged
+            self.supervisor.error("aggregates", exc)
+            query.reply_err(f"aggregates: {type(exc).__name__}: {exc}".encode())
+        finally:
+            query.drop()
 
     def _has_priority(self, vehicle: str) -> bool:
         """Vehicles listed earlier in the mission have priority when two choose the same spot."""

@@ -7,7 +7,8 @@ failing iterations) marks the node failed: its main thread then exits non-zero s
 ``layerpilot up`` restarts it. Each loop beats a heartbeat at every iteration (workers wait
 with timeouts, so an idle loop still beats); a loop whose heartbeat is older than
 ``STALL_AFTER`` is stalled, which also fails the node. The node's status lines carry the
-age of every loop's heartbeat and of the last input on every key.
+age of every loop's heartbeat and of the last input on every key; a :class:`HealthPublisher`
+puts the same dict on the node's health key for the operator's view and recordings.
 """
 
 from __future__ import annotations
@@ -18,6 +19,12 @@ import time
 import traceback
 from collections import Counter
 from collections.abc import Callable
+
+import zenoh
+
+from layerpilot.bus import keys
+from layerpilot.bus.messages import NodeHealth, encode_health
+from layerpilot.bus.session import publish
 
 MAX_FAILURES_IN_A_ROW = 50  # failing iterations without one good one: the loop cannot go on
 STALL_AFTER = 30.0  # s without a heartbeat: the loop is stuck
@@ -113,3 +120,32 @@ class Supervisor:
     def join(self, timeout: float | None = None) -> None:
         for t in self._threads:
             t.join(timeout)
+
+
+class HealthPublisher:
+    """A node's status on the bus, ``layerpilot/<vehicle>/health/<node>``: what its status line prints.
+
+    The map server, one for all vehicles, puts its own on every vehicle's key (a view follows one
+    vehicle). A status that cannot be sent (a value JSON refuses, a closed session) is counted and
+    logged once per kind; the node goes on.
+    """
+
+    def __init__(self, session: zenoh.Session, node: str, vehicles: list[str], log: logging.Logger) -> None:
+        self.session, self.node, self.log = session, node, log
+        self.keys = {v: keys.Keys(v).health(node) for v in vehicles}
+        self.started = time.monotonic()
+        self.sent = 0
+        self.failed: Counter[str] = Counter()
+
+    def publish(self, status: dict) -> None:
+        uptime = time.monotonic() - self.started
+        for vehicle, key in self.keys.items():
+            try:
+                publish(self.session, key, encode_health(NodeHealth(vehicle, self.node, uptime, status)))
+                self.sent += 1
+            except (ValueError, TypeError, zenoh.ZError) as exc:
+                kind = type(exc).__name__
+                if not self.failed[kind]:
+                    self.log.warning("health: cannot send the status on %s (further ones are only counted): %s",
+                                     key, exc)
+                self.failed[kind] += 1

@@ -3,6 +3,9 @@
 Zenoh callbacks only decode and keep the newest message per key (and count arrivals, for the
 rates); one worker logs them every ``period`` seconds, the path and the map server's voxels and
 statistics every ``map_period`` seconds, and turns each layer set into layer images and metrics.
+On the same period it asks the decide node for the last tick's aggregate layers A0..A3 (a
+queryable: the decide node sends them to no one else) and plots each node's health
+(``health/<node>``: the counters of its status line, their rates, heartbeat and input ages).
 A bad message is rejected and counted like in any node; the view never publishes anything.
 """
 
@@ -23,10 +26,12 @@ from layerpilot.bus.layerset import decode_layer_set, to_column_layers
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.decide import zone_mask
+from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import Voxels
 from layerpilot.mission.config import Mission
 from layerpilot.mission.pilot import load_pilot_behavior
+from layerpilot.nodes.decide import decode_aggregates
 from layerpilot.viz.scene import MissionScene, area_outline
 
 _log = logging.getLogger("layerpilot.view")
@@ -55,21 +60,38 @@ class LiveView:
         self._stop = threading.Event()
         self._now = 0.0  # newest mission time heard
         self._aoi: tuple[object, np.ndarray] | None = None
-        self._sub = None
+        self._grid: GridGeometry | None = None  # the layer images' grid: the aggregates are placed on it
+        self._aggregates: tuple[float, GridGeometry] | None = None  # the last logged tick
+        self._health: dict[str, tuple[float, dict]] = {}  # node -> (uptime, status) last logged
+        self._subs: list = []
         self._thread = threading.Thread(target=self._run, name="view", daemon=True)
 
     def start(self) -> None:
         self.scene.area(area_outline(self.behavior.area.shape, self.behavior.area.radius,
                                      self.behavior.area.center or self.mission.decide.home,
                                      self.behavior.area.polygon))
-        self._sub = self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/*", self._on_sample)
+        self._subs = [self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/*", self._on_sample),
+                      self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/health/*", self._on_health)]
         self._thread.start()
 
     def stop(self) -> None:
         self._stop.set()
-        if self._sub is not None:
-            self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
         self._thread.join()
+
+    def _on_health(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            health = msg.decode_health(sample.payload.to_bytes())
+            if key != self.keys.health(health.node) or health.vehicle != self.vehicle:
+                raise BadMessage("wrong key", f"health of {health.node} of {health.vehicle} on {key}")
+        except BadMessage as exc:
+            self.rejects.reject(key, exc)
+            return
+        with self._lock:
+            self.heard["health"] += 1
+            self._newest.setdefault("health", []).append(health)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -100,6 +122,7 @@ class LiveView:
                     next_map = now + self.map_period
                     self.scene.path()
                     self._log_map()
+                    self._log_aggregates()
                     rates = {f"rate/{t}": (counts[t] - last_counts[t]) / (now - last_rates) for t in counts}
                     self.scene.scalars("health", {**rates, "view/rejected": self.rejects.total})
                     last_rates, last_counts = now, counts
@@ -123,6 +146,7 @@ class LiveView:
             self.logged["decision"] += 1
         if (ls := newest.get("layers")) is not None:
             columns = to_column_layers(ls)
+            self._grid = columns.geometry
             self.scene.at(max(self._now, ls.stamp))
             self.scene.layers({"color": columns.color, "elevation": np.where(columns.observed, columns.elevation,
                                                                              np.nan),
@@ -132,6 +156,44 @@ class LiveView:
             if self.metrics is not None:
                 self.scene.scalars("metrics", self.metrics(columns, self._area(columns), max(self._now, ls.stamp)))
             self.logged["layers"] += 1
+        for health in newest.get("health", []):  # no mission stamp of their own: logged at the newest one heard
+            self.scene.at(self._now)
+            self.scene.scalars(f"health/{health.node}", self._health_series(health))
+            self.logged[f"health/{health.node}"] += 1
+
+    def _health_series(self, h: msg.NodeHealth) -> dict[str, float]:
+        """A node's status as time series: its numbers (a nested count like ``inputs`` per key's last part),
+        and per second how each whole-number counter grew since the node's previous status."""
+        values: dict[str, float] = {}
+        for name, value in h.status.items():
+            items = value.items() if isinstance(value, dict) else [("", value)]
+            for sub, v in items:
+                if isinstance(v, (int, float)) and not isinstance(v, bool):
+                    values[f"{name}/{str(sub).rsplit('/', 1)[-1]}" if sub else name] = float(v)
+        before = self._health.get(h.node)
+        self._health[h.node] = (h.uptime, h.status)
+        if before is not None and h.uptime > before[0]:
+            for name, v in h.status.items():
+                old = before[1].get(name)
+                if isinstance(v, int) and isinstance(old, int) and not isinstance(v, bool):
+                    values[f"rate/{name}"] = (v - old) / (h.uptime - before[0])
+        return values
+
+    def _log_aggregates(self) -> None:
+        """The decide node's last tick, A0..A3 over the layer images, if it is a new one."""
+        if self._grid is None or (reply := self._query(self.keys.aggregates, "", quiet=True)) is None:
+            return
+        try:
+            ls = decode_aggregates(reply, self.vehicle)
+        except BadMessage as exc:
+            self.rejects.reject(self.keys.aggregates, exc)
+            return
+        if self._aggregates == (ls.stamp, ls.geometry):
+            return
+        self._aggregates = (ls.stamp, ls.geometry)
+        self.scene.at(ls.stamp)
+        self.scene.aggregates(ls.layers, ls.geometry, self._grid)
+        self.logged["aggregates"] += 1
 
     def _area(self, columns: ColumnLayers) -> np.ndarray:
         if self._aoi is None or self._aoi[0] != columns.geometry:
@@ -171,9 +233,14 @@ class LiveView:
             self.scene.scalars("health", {f"map/{n}": getattr(s, n) for n in (
                 "clouds_received", "clouds_inserted", "clouds_dropped", "messages_rejected", "leaves")})
 
-    def _query(self, key: str, parameters: str) -> bytes | None:
+    def _query(self, key: str, parameters: str, quiet: bool = False) -> bytes | None:
+        """The first good reply; an error reply is counted (``quiet``: only logged at debug level: the
+        decide node has nothing to show before its first tick, or for a scripted pattern)."""
         for reply in self.session.get(f"{key}?{parameters}" if parameters else key, timeout=5.0):
             if reply.ok is not None:
                 return reply.ok.payload.to_bytes()
-            self.rejects.reject(key, BadMessage("query failed", reply.err.payload.to_string()))
+            if quiet:
+                _log.debug("%s: %s", key, reply.err.payload.to_string())
+            else:
+                self.rejects.reject(key, BadMessage("query failed", reply.err.payload.to_string()))
         return None

@@ -1,6 +1,7 @@
 """The scene of a lock-step mission (`demo`, `study`): the evaluator hands over what it has, this logs it.
 
-Poses and decisions are logged as they come; the path, the camera image and the layers every
+Poses and decisions (with the tick's aggregate layers A0..A3 over the layers) are logged as they
+come; the path, the camera image and the layers every
 ``IMAGE_PERIOD`` and the voxel map every ``MAP_PERIOD`` mission seconds, so that a 600 s run's
 .rrd stays a few MB (the scene is a picture of the run, not a second copy of its map).
 """
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from layerpilot.decide.behavior import Behavior
+from layerpilot.decide.maker import TickTerms
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.grid import GridGeometry
 from layerpilot.map import VoxelMap
@@ -67,9 +69,12 @@ class LockstepView:
             if self.scene.voxels(voxel_map.voxels(*box), t, voxel_map.resolution):
                 self._next_map = t + MAP_PERIOD
 
-    def decision(self, t: float, record: Mapping) -> None:
-        """A command's decisions.jsonl record: its waypoint, runner-up and explanation."""
+    def decision(self, t: float, record: Mapping, tick: TickTerms | None = None) -> None:
+        """A command's decisions.jsonl record: its waypoint, runner-up and explanation; ``tick``: the
+        decision maker's tick that chose it (its A0..A3, on the window it computed)."""
         self.scene.at(t)
+        if tick is not None and tick.placement is not None:
+            self.scene.aggregates(tick.aggregates(), tick.placement, self.geometry)
         runner = record.get("runner_up")
         self.scene.decision(record["waypoint"], None if runner is None else runner["waypoint"],
                             record.get("explanation") or f"{record.get('reason', '')} waypoint {record['seq']}: "

@@ -4,8 +4,10 @@
 height or the time since they were seen; ``world/drone``: the pose, with ``world/drone/camera`` its
 frustum and last image; ``world/path``: the flight path; ``world/target`` and ``world/runner_up``:
 the current choice, with ``decision`` the decide node's one-line explanation; ``world/area``: the
-area of interest; ``layers/<name>``: 2D layers as colormapped images; ``metrics/<name>`` and
-``health/<name>``: time series. Timeline ``mission``: mission seconds.
+area of interest; ``layers/<name>``: 2D layers as colormapped images, with ``layers/A0`` ..
+``layers/A3`` the decision's aggregate layers placed on them where the tick computed them;
+``metrics/<name>`` and ``health/<name>`` (``health/<node>/...`` per node): time series.
+Timeline ``mission``: mission seconds.
 """
 
 from __future__ import annotations
@@ -43,14 +45,16 @@ def colormap(values: np.ndarray, name: str = "viridis", lo: float | None = None,
     return rgb
 
 
-def encoded(rgb: np.ndarray, suffix: str) -> rr.EncodedImage:
-    """An RGB image compressed (PNG for layers, JPEG for camera frames): an .rrd of a long run stays small."""
+def encoded(rgb: np.ndarray, suffix: str, draw_order: float | None = None) -> rr.EncodedImage:
+    """An RGB(A) image compressed (PNG for layers, JPEG for camera frames): an .rrd of a long run stays small."""
     import cv2
 
-    ok, data = cv2.imencode(suffix, np.ascontiguousarray(rgb[..., ::-1]))
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGBA2BGRA) if rgb.shape[-1] == 4 else rgb[..., ::-1]
+    ok, data = cv2.imencode(suffix, np.ascontiguousarray(bgr))
     if not ok:
         raise ValueError(f"image: OpenCV could not encode a {rgb.shape} image as {suffix}")
-    return rr.EncodedImage(contents=data.tobytes(), media_type="image/png" if suffix == ".png" else "image/jpeg")
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/png" if suffix == ".png" else "image/jpeg",
+                           draw_order=draw_order)
 
 
 def area_outline(shape: str, radius: float, center: Sequence[float], polygon: Sequence[Sequence[float]],
@@ -105,6 +109,18 @@ class MissionScene:
             values = np.asarray(values)
             image = values if values.ndim == 3 else colormap(values.astype(np.float64), "viridis")
             self.stream.log(f"layers/{name}", encoded(image[::-1], ".png"))
+
+    def aggregates(self, images: Mapping[str, np.ndarray], placement: GridGeometry, under: GridGeometry) -> None:
+        """The decision's A0..A3 (``layers/A0`` ...) on the window a tick computed (``placement``, map frame),
+        drawn in place over the layer images of grid ``under``; cells scoring 0 are transparent."""
+        scale = placement.resolution / under.resolution
+        left = (placement.origin_x - under.origin_x) / under.resolution
+        top = (under.extent[3] - placement.extent[3]) / under.resolution  # images are north up
+        for name, values in images.items():
+            v = np.asarray(values, np.float64)
+            rgba = np.dstack([colormap(v, "inferno", 0.0), np.where(np.isfinite(v) & (v > 0), 255, 0)])
+            self.stream.log(f"layers/{name}", rr.Transform3D(translation=[left, top, 0.0], scale=[scale, scale, 1.0]))
+            self.stream.log(f"layers/{name}", encoded(rgba[::-1].astype(np.uint8), ".png", draw_order=10.0))
 
     def pose(self, pose: Pose) -> None:
         """The drone (body -> map); its position is the path's next vertex (see ``path``)."""

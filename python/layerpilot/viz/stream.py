@@ -14,6 +14,8 @@ from urllib.parse import quote
 
 import rerun as rr
 
+from layerpilot.bus.keys import NODES
+
 APPLICATION = "layerpilot"
 
 
@@ -60,13 +62,18 @@ def layout():
 
     layers = [rrb.Spatial2DView(origin=f"layers/{name}", name=name)
               for name in ("color", "elevation", "time_since_seen", "distance")]
+    # the decision's aggregates over the color layer, where the tick computed them
+    aggregates = [rrb.Spatial2DView(origin="layers", contents=["layers/color", f"layers/{name}"], name=name)
+                  for name in ("A3", "A2", "A1", "A0")]
+    nodes = [rrb.TimeSeriesView(origin=f"health/{node}", name=node) for node in NODES]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(origin="world", name="mission"),
-            rrb.Vertical(rrb.Tabs(*layers, rrb.Spatial2DView(origin="world/camera", name="camera")),
+            rrb.Vertical(rrb.Tabs(*layers, *aggregates, rrb.Spatial2DView(origin="world/camera", name="camera")),
                          rrb.TextLogView(origin="decision", name="decisions"),
-                         rrb.Tabs(rrb.TimeSeriesView(origin="metrics", name="metrics"),
-                                  rrb.TimeSeriesView(origin="health", name="node health"))),
+                         rrb.Tabs(rrb.TimeSeriesView(origin="metrics", name="metrics"), *nodes,
+                                  rrb.TimeSeriesView(origin="health", contents=["health/rate/**", "health/map/**",
+                                                                                "health/view/**"], name="bus"))),
             column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="collapsed"))
