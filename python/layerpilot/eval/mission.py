@@ -196,8 +196,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                         if link.refused[exc.kind] == 1:
                             logging.getLogger("layerpilot.eval").warning("waypoint refused by the link: %s", exc)
                     records.append(record)
-                    if view is not None:
-                        view.decision(t, record)
+                    if view is not None:  # with the tick's A0..A3 when the maker chose it
+                        view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
                 if t >= next_frame - 1e-9:
                     next_frame += frame_period
                     pose = sim.endpoint.pose()
