@@ -9,6 +9,11 @@ mean -inf, +inf and NaN), booleans as packed bits, colors raw; everything LZ4'd 
 ``max_bytes`` (1 MB by default) it is zlib'd instead, then quantized layers fall back to
 uint8, and a set that is still too big is refused with its size, so a query cannot flood
 the bus.
+
+A large survey's set carries only the drone's neighbourhood in full (``window``): its
+``observed`` covers the whole grid (the pilot's coverage and fringe read all of it) and
+the ranges the layers are scaled by travel as two numbers each (``ColumnLayers``), so a
+1 km area is a few hundred kilobytes at most instead of megabytes.
 """
 
 from __future__ import annotations
@@ -23,8 +28,8 @@ from layerpilot.bus.keys import check_vehicle
 from layerpilot.bus.messages import _finite, _vehicle, parse
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
-from layerpilot.grid import GridGeometry
-from layerpilot.map.columns import ColumnLayers
+from layerpilot.grid import GridGeometry, GridWindow
+from layerpilot.map.columns import RANGED, ColumnLayers, observed_range
 
 MAX_BYTES = 1_000_000
 ENCODINGS = {"raw": pb.Layer.RAW, "float16": pb.Layer.FLOAT16, "uint8": pb.Layer.UINT8,
@@ -33,6 +38,9 @@ _QUANT = {pb.Layer.UINT8: np.uint8, pb.Layer.UINT16: np.uint16}
 # how the map server's column layers travel unless asked otherwise
 COLUMN_ENCODINGS = {"observed": "bits", "elevation": "float16", "color": "raw",
                     "last_seen": "uint16", "min_distance": "float16"}
+WHOLE = ("observed",)  # layers that cover the whole grid even in a windowed set
+# what a windowed set's arrays read as outside the window (ColumnLayers' unobserved values)
+_UNOBSERVED = {"elevation": np.nan, "color": 0, "last_seen": np.nan, "min_distance": np.inf}
 
 
 @dataclass(frozen=True)
@@ -42,7 +50,9 @@ class GridLayersMessage:
     stamp: float
     vehicle: str
     geometry: GridGeometry
-    layers: dict[str, np.ndarray]  # each (height, width) or (height, width, channels)
+    layers: dict[str, np.ndarray]  # each (height, width) or (height, width, channels); with window: its shape
+    window: GridWindow | None = None  # set: every layer but those in WHOLE holds only these cells
+    ranges: dict[str, tuple[float, float]] | None = None  # with window: whole-grid (min, max) per RANGED layer
 
 
 def column_arrays(cl: ColumnLayers, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
@@ -54,19 +64,29 @@ def column_arrays(cl: ColumnLayers, names: tuple[str, ...] | None = None) -> dic
     return {n: getattr(cl, n) for n in names}
 
 
-def encode_columns(cl: ColumnLayers, stamp: float, vehicle: str, names: tuple[str, ...] | None = None) -> bytes:
+def encode_columns(cl: ColumnLayers, stamp: float, vehicle: str, names: tuple[str, ...] | None = None,
+                   window: GridWindow | None = None) -> bytes:
     """A map's column layers as the map server publishes them (the one encoder of the live node and the
-    lock-step evaluator, so both drivers' pilots read the same bytes)."""
-    return encode_layer_set(GridLayersMessage(stamp, vehicle, cl.geometry, column_arrays(cl, names)))
+    lock-step evaluator, so both drivers' pilots read the same bytes).
+
+    ``window``: only those cells in full (the drone's neighbourhood), plus ``observed`` and the
+    value ranges of the whole grid: what a pilot's tick there reads.
+    """
+    arrays_ = column_arrays(cl, names)
+    if window is None:
+        return encode_layer_set(GridLayersMessage(stamp, vehicle, cl.geometry, arrays_))
+    ranges = {n: r for n in RANGED if n in arrays_ and (r := observed_range(arrays_[n], cl.observed)) is not None}
+    arrays_ = {n: a if n in WHOLE else a[window.slices] for n, a in arrays_.items()}
+    return encode_layer_set(GridLayersMessage(stamp, vehicle, cl.geometry, arrays_, window, ranges))
 
 
-def _quantize(m: pb.Layer, arr: np.ndarray, enc: int, codec: str) -> None:
+def _quantize(m: pb.Layer, arr: np.ndarray, enc: int, codec: str, span: tuple[float, float] | None) -> None:
     qt = _QUANT[enc]
     top = int(np.iinfo(qt).max)
     levels = top - 3  # codes 0..levels are values; top-2 = -inf, top-1 = +inf, top = NaN
     a = np.asarray(arr, np.float64)
     finite = np.isfinite(a)
-    lo, hi = _finite_range(a, finite)
+    lo, hi = _finite_range(a, finite) if span is None else span  # a window: the whole grid's, as its set would
     scale = (hi - lo) / levels if hi > lo else 1.0
     t = np.subtract(a, lo)
     t /= scale
@@ -90,7 +110,9 @@ def _finite_range(a: np.ndarray, finite: np.ndarray) -> tuple[float, float]:
     return lo, hi
 
 
-def encode_layer(m: pb.Layer, name: str, arr: np.ndarray, encoding: str, codec: str = "lz4") -> None:
+def encode_layer(m: pb.Layer, name: str, arr: np.ndarray, encoding: str, codec: str = "lz4",
+                 span: tuple[float, float] | None = None) -> None:
+    """``span``: quantize over this (min, max) instead of the array's own (it must contain the values)."""
     arr = np.asarray(arr)
     if encoding not in ENCODINGS:
         raise ValueError(f"encoding: unknown {encoding!r} for layer {name}; known: {', '.join(ENCODINGS)}")
@@ -108,27 +130,43 @@ def encode_layer(m: pb.Layer, name: str, arr: np.ndarray, encoding: str, codec: 
     elif enc == pb.Layer.FLOAT16:
         arrays.to_proto(arr.astype(np.float16), m.data, compress=codec)
     else:
-        _quantize(m, arr, enc, codec)
+        _quantize(m, arr, enc, codec, span)
 
 
 def encode_layer_set(ls: GridLayersMessage, encodings: dict[str, str] | None = None, *,
                      max_bytes: int = MAX_BYTES) -> bytes:
     """Serialize ``ls``; ``encodings`` overrides the per-layer default (COLUMN_ENCODINGS, else raw)."""
-    g = ls.geometry
+    g, win, ranges = ls.geometry, ls.window, ls.ranges or {}
+    if win is not None and not GridWindow.full(g).contains(win):
+        raise ValueError(f"window: {win} does not lie within the grid {g}")
     chosen = {n: (encodings or {}).get(n, COLUMN_ENCODINGS.get(n, "raw")) for n in ls.layers}
     for chosen, codec in ((chosen, "lz4"), (chosen, "zlib"), (_coarser(chosen), "zlib")):
         m = pb.LayerSet(stamp=float(ls.stamp), vehicle=check_vehicle(ls.vehicle))
         m.grid.CopyFrom(pb.GridGeometry(origin_x=g.origin_x, origin_y=g.origin_y, resolution=g.resolution,
                                         width=g.width, height=g.height))
+        if win is not None:
+            m.window.CopyFrom(pb.CellWindow(row0=win.row0, row1=win.row1, col0=win.col0, col1=win.col1))
         for name, arr in ls.layers.items():
-            if np.shape(arr)[:2] != g.shape:
-                raise ValueError(f"layers[{name}]: shape {np.shape(arr)} does not match the grid {g.shape}")
-            encode_layer(m.layers.add(), name, arr, chosen[name], codec)
+            shape = g.shape if win is None or name in WHOLE else win.shape
+            if np.shape(arr)[:2] != shape:
+                raise ValueError(f"layers[{name}]: shape {np.shape(arr)} does not match the grid {shape}")
+            encode_layer(m.layers.add(), name, arr, chosen[name], codec, ranges.get(name))
+            if name in ranges:  # as the pilot of a whole-grid set would see it: through the same encoding
+                lo, hi = _as_sent(name, ranges[name], chosen[name])
+                m.ranges.add(layer=name, min=lo, max=hi)
         data = m.SerializeToString()
         if len(data) <= max_bytes:
             return data
     raise ValueError(f"layer set of {g.width}x{g.height} with {', '.join(ls.layers)} is {len(data)} bytes, "
                      f"more than max_bytes={max_bytes}; ask for a smaller window or fewer layers")
+
+
+def _as_sent(name: str, span: tuple[float, float], encoding: str) -> tuple[float, float]:
+    """A range's two ends encoded and decoded as the layer's values are."""
+    m = pb.Layer()
+    encode_layer(m, name, np.array([span], np.float64), encoding, "lz4", span)
+    lo, hi = decode_layer(m, (1, 2))[0]
+    return float(lo), float(hi)
 
 
 def _coarser(chosen: dict[str, str]) -> dict[str, str]:
@@ -196,12 +234,26 @@ def decode_layer_set(payload: bytes) -> GridLayersMessage:
         if isinstance(exc, BadMessage):
             raise
         raise BadMessage("bad grid", str(exc)) from None
+    window = None
+    if m.HasField("window"):
+        w = m.window
+        try:
+            window = GridWindow(w.row0, w.row1, w.col0, w.col1)
+        except ValueError as exc:
+            raise BadMessage("bad window", str(exc)) from None
+        if not GridWindow.full(geometry).contains(window):
+            raise BadMessage("bad window", f"window: {window} does not lie within the grid {geometry}")
     layers: dict[str, np.ndarray] = {}
     for lm in m.layers:
         if not lm.name or lm.name in layers:
             raise BadMessage("bad layer name", f"empty or repeated layer name {lm.name!r}")
-        layers[lm.name] = decode_layer(lm, geometry.shape)
-    return GridLayersMessage(_finite(m.stamp, "stamp"), _vehicle(m), geometry, layers)
+        layers[lm.name] = decode_layer(lm, geometry.shape if window is None or lm.name in WHOLE else window.shape)
+    ranges = {}
+    for r in m.ranges:
+        if not (math.isfinite(r.min) and math.isfinite(r.max) and r.min <= r.max):
+            raise BadMessage("bad range", f"ranges[{r.layer}]: ({r.min}, {r.max}) is not a finite min <= max")
+        ranges[r.layer] = (r.min, r.max)
+    return GridLayersMessage(_finite(m.stamp, "stamp"), _vehicle(m), geometry, layers, window, ranges)
 
 
 def to_column_layers(ls: GridLayersMessage) -> ColumnLayers:
@@ -211,7 +263,14 @@ def to_column_layers(ls: GridLayersMessage) -> ColumnLayers:
         raise BadMessage("missing layer", ", ".join(missing))
     kinds = {"observed": np.bool_, "elevation": np.float32, "color": np.uint8,
              "last_seen": np.float64, "min_distance": np.float32}
+    arrays_ = {n: np.asarray(ls.layers[n]).astype(t, copy=False) for n, t in kinds.items()}
+    win = ls.window
     try:
-        return ColumnLayers(ls.geometry, **{n: np.asarray(ls.layers[n]).astype(t, copy=False) for n, t in kinds.items()})
+        if win is not None:  # whole-grid arrays, unobserved outside the window
+            for n, fill in _UNOBSERVED.items():
+                whole = np.full(ls.geometry.shape + arrays_[n].shape[2:], fill, kinds[n])
+                whole[win.slices] = arrays_[n]
+                arrays_[n] = whole
+        return ColumnLayers(ls.geometry, **arrays_, window=win, ranges=dict(ls.ranges or {}))
     except ValueError as exc:
         raise BadMessage("bad layer", str(exc)) from None

@@ -178,8 +178,10 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             while True:
                 if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec
                     next_layers += layer_period
+                    at = sim.endpoint.pose().position - origin  # in full around the drone, as the node's
                     message = wire.encode_columns(service.columns(), service.last_stamp, vehicle,
-                                                  mission.map_server.layers)
+                                                  mission.map_server.layers,
+                                                  service.detail(at[0], at[1], pilot.layer_reach))
                     columns = wire.to_column_layers(wire.decode_layer_set(message))
                 position = sim.endpoint.pose().position - origin  # in the map frame
                 evaluations = pilot.evaluations

@@ -12,6 +12,7 @@ import numpy as np
 
 from layerpilot.grid import GridWindow
 from layerpilot.layers.distance import ClosedDistance
+from layerpilot.map.columns import observed_range
 
 
 def _check_mask(observed: np.ndarray) -> np.ndarray:
@@ -60,22 +61,6 @@ _LOCK = threading.Lock()
 _TRACKERS: dict[int, ClosedDistance] = {}  # per closing size: the last mask's distances, kept up to date
 
 
-def _value_range(values: np.ndarray, observed: np.ndarray) -> tuple[float, float] | None:
-    """(min, max) of the finite values of observed cells; None if there are none.
-
-    Unobserved columns hold NaN (``ColumnLayers``' contract), so a NaN-ignoring reduction
-    over the whole array, one fast pass, finds them; only if it meets an infinity (not a
-    valid value) is the slower masked reduction needed.
-    """
-    lo, hi = float(np.fmin.reduce(values, axis=None)), float(np.fmax.reduce(values, axis=None))
-    if np.isfinite(lo) and np.isfinite(hi):
-        return lo, hi
-    valid = observed & np.isfinite(values)
-    if not valid.any():
-        return None
-    return float(np.min(values, where=valid, initial=np.inf)), float(np.max(values, where=valid, initial=-np.inf))
-
-
 def _scaled(values: np.ndarray, valid: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """(v - lo) / (hi - lo) on ``valid`` cells, 0 elsewhere and when hi == lo."""
     out = np.zeros(values.shape, np.float32)
@@ -91,15 +76,17 @@ def _region(arr: np.ndarray, window: GridWindow | None) -> np.ndarray:
 
 
 def time_since_seen(observed: np.ndarray, last_seen: np.ndarray, now: float,
-                    window: GridWindow | None = None) -> np.ndarray:
+                    window: GridWindow | None = None, span: tuple[float, float] | None = None) -> np.ndarray:
     """Age (now - last seen) scaled over observed columns: oldest 1, freshest 0, all equal 0.
 
-    ``window``: only those cells, still scaled over the whole grid.
+    ``window``: only those cells, still scaled over the whole grid. ``span``: the whole
+    grid's (oldest, newest) when ``last_seen`` holds values only near the drone
+    (``ColumnLayers.value_range``); default: from the arrays.
     """
     _check_like("last_seen", last_seen, _check_mask(observed))
     if not np.isfinite(now):
         raise ValueError(f"now: must be finite, got {now}")
-    seen = _value_range(last_seen, observed)
+    seen = observed_range(last_seen, observed) if span is None else span
     last, obs = _region(last_seen, window), _region(observed, window)
     if seen is None:
         return np.zeros(last.shape, np.float32)
@@ -118,10 +105,14 @@ def min_distance(observed: np.ndarray, distance: np.ndarray, max_distance: float
     return np.where(seen, distance / np.float32(max_distance), np.float32(0)).astype(np.float32, copy=False)
 
 
-def elevation(observed: np.ndarray, top: np.ndarray, window: GridWindow | None = None) -> np.ndarray:
-    """Top of the highest occupied voxel scaled over observed columns (lowest 0, highest 1)."""
+def elevation(observed: np.ndarray, top: np.ndarray, window: GridWindow | None = None,
+              span: tuple[float, float] | None = None) -> np.ndarray:
+    """Top of the highest occupied voxel scaled over observed columns (lowest 0, highest 1).
+
+    ``span``: the whole grid's (lowest, highest), as for ``time_since_seen``.
+    """
     _check_like("elevation", top, _check_mask(observed))
-    span = _value_range(top, observed)
+    span = observed_range(top, observed) if span is None else span
     top, obs = _region(top, window), _region(observed, window)
     if span is None:
         return np.zeros(top.shape, np.float32)

@@ -162,10 +162,10 @@ def _layer(name: str, columns: ColumnLayers, voxel_map: Any, context: LayerConte
 
 register_layer("fringe", lambda c, m, ctx, window=None: features.fringe(c.observed, ctx.options.fringe_closing,
                                                                         window), windowed=True)
-register_layer("time", lambda c, m, ctx, window=None: features.time_since_seen(c.observed, c.last_seen, ctx.now,
-                                                                              window), windowed=True)
+register_layer("time", lambda c, m, ctx, window=None: features.time_since_seen(
+    c.observed, c.last_seen, ctx.now, window, c.value_range("last_seen")), windowed=True)
 register_layer("distance", lambda c, m, ctx, window=None: features.min_distance(
     c.observed, c.min_distance, ctx.options.max_distance, window), windowed=True)
-register_layer("elevation", lambda c, m, ctx, window=None: features.elevation(c.observed, c.elevation, window),
-               windowed=True)
+register_layer("elevation", lambda c, m, ctx, window=None: features.elevation(
+    c.observed, c.elevation, window, c.value_range("elevation")), windowed=True)
 register_layer("view_gain", view_gain.layer)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from layerpilot.config import check_range
+from layerpilot.grid import GridGeometry, GridWindow
 from layerpilot.map import VoxelMap
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import KEY_OFFSET, InsertResult, Voxels
@@ -34,6 +35,7 @@ class MapServiceConfig:
     layers_rate: float = 1.0  # Hz (mission time): a layer set per vehicle this often
     window: tuple[float, float, int, int] = (-128.0, -128.0, 256, 256)  # x, y (south-west, m), w, h (cells)
     layers: tuple[str, ...] = COLUMN_LAYERS  # what the pilots need
+    detail_margin: float = 30.0  # m: a vehicle's layer set is full within its pilot's reach + this of its pose
     snapshot: str = "runs/map.ot"  # "" = no snapshots
     snapshot_period: float = 30.0  # s (mission time)
     snapshot_keep: int = 3  # good snapshots kept (newest first)
@@ -51,6 +53,7 @@ class MapServiceConfig:
         check_range("map_server.max_range", self.max_range, 0.1, 10_000.0)
         check_range("map_server.query_threads", self.query_threads, 1, 64)
         check_range("map_server.max_voxels", self.max_voxels, 1, 10_000_000)
+        check_range("map_server.detail_margin", self.detail_margin, 0.0, 10_000.0)
         check_range("map_server.window width", self.window[2], 1, MAX_WINDOW)
         check_range("map_server.window height", self.window[3], 1, MAX_WINDOW)
         if not set(self.layers) <= set(COLUMN_LAYERS):
@@ -106,6 +109,21 @@ class MapService:
         if not (0 < w <= MAX_WINDOW and 0 < h <= MAX_WINDOW):
             raise ValueError(f"w, h: must be in 1..{MAX_WINDOW}, got {w}x{h}")
         return self.map.column_layers(x, y, int(w), int(h))
+
+    @property
+    def geometry(self) -> GridGeometry:
+        """The grid of the configured window, snapped to the map's cells as ``columns()`` gives it."""
+        x, y, w, h = self.cfg.window
+        res = self.map.resolution
+        return GridGeometry(math.floor(x / res) * res, math.floor(y / res) * res, res, int(w), int(h))
+
+    def detail(self, x: float, y: float, reach: float) -> GridWindow:
+        """The cells of the configured window a pilot at (x, y) reads, with ``detail_margin`` to spare.
+
+        The pose a layer set is centred on is older than the pilot's next tick: the margin
+        covers the flight in between (a pilot waits for a set that covers its tick).
+        """
+        return GridWindow.around(self.geometry, x, y, reach + self.cfg.detail_margin)
 
     def voxels(self, lo: np.ndarray, hi: np.ndarray, min_occupancy: float | None = None, offset: int = 0) -> VoxelPage:
         """Occupied voxels in a box, at most ``max_voxels`` per page from ``offset``."""

@@ -121,6 +121,11 @@ class Pilot:
         return self.pattern_speed if self.pattern is not None else self.cfg.speed
 
     @property
+    def layer_reach(self) -> float:
+        """How far from the drone a tick reads column layers (m): r_i, plus the camera's reach for view_gain."""
+        return self.behavior.r_i + (self.view.reach if self.view is not None else 0.0)
+
+    @property
     def retargets(self) -> bool:
         return self.maker is not None and self.behavior.retarget.enabled
 
@@ -164,7 +169,7 @@ class Pilot:
             self._waiting = reason
             if self.pattern is not None:
                 return self._from_pattern(time, reason)
-            if columns is None:
+            if columns is None or not self._covers(columns, position):
                 return None
             self.evaluations += 1
             self._reconsidered = columns
@@ -174,12 +179,17 @@ class Pilot:
             self.ticks.append((float(position[0]), float(position[1]), g.origin_x, g.origin_y, g.resolution,
                                g.width, g.height))
             return self._from_decision(decision, position, time, reason)
-        if not self.retargets or columns is None or columns is self._reconsidered:
+        if (not self.retargets or columns is None or columns is self._reconsidered
+                or not self._covers(columns, position)):
             return None
         self._reconsidered = columns
         self.evaluations += 1
         decision = self.maker.reconsider(self._layers(columns, position, time), position, time, avoid=avoid)
         return None if decision is None else self._from_decision(decision, position, time, "retarget")
+
+    def _covers(self, columns: ColumnLayers, position: Sequence[float]) -> bool:
+        """A windowed layer set (a large survey's) holds every cell this tick reads; else wait for one nearer."""
+        return columns.window is None or columns.window.contains(self.maker.window(columns.geometry, position))
 
     def _conflicts(self, points: Sequence[Sequence[float]]) -> bool:
         return any(math.hypot(p[0] - self.target[0], p[1] - self.target[1]) < self.behavior.r_e for p in points)

@@ -3,7 +3,9 @@
 Clouds from ``layerpilot/<vehicle>/cloud`` (the mission's vehicles only) are decoded on
 Zenoh's thread and queued; one worker inserts them (the C++ insert releases the GIL). The
 queue is bounded: when clouds come faster than they can be inserted the oldest is dropped
-and counted. Layer sets are published at a fixed rate, queries are answered by a small
+and counted. Layer sets are published at a fixed rate, each in full only around its vehicle's
+newest pose (its home before the first; ``MapService.detail``), so a square-kilometre area
+fits the bus's layer-set cap; queries are answered by a small
 thread pool (every query gets a reply, an error naming the problem if need be), and the
 service's snapshot policy is checked twice a second.
 """
@@ -22,10 +24,11 @@ import zenoh
 from layerpilot.bus import arrays, keys
 from layerpilot.bus.guard import guarded, query_params
 from layerpilot.bus.layerset import encode_columns
-from layerpilot.bus.messages import CloudMessage, decode_cloud
+from layerpilot.bus.messages import CloudMessage, State, decode_cloud, decode_state
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
+from layerpilot.mission.build import build_pilot
 from layerpilot.mission.config import Mission
 from layerpilot.mission.map_service import COLUMN_LAYERS, MapService
 from layerpilot.nodes.queue import DropOldest
@@ -56,6 +59,9 @@ class MapServer:
         self._next_publish = time.monotonic()
         self._layer_cache: dict[tuple, tuple[int, bytes]] = {}  # window -> (map revision, encoded layer set)
         self._layer_cache_lock = threading.Lock()
+        self._reach = build_pilot(mission).layer_reach  # how far from its drone a pilot's tick reads
+        home = (float(mission.decide.home[0]), float(mission.decide.home[1]))
+        self._where = {v: home for v in self.vehicles}  # each vehicle's newest (x, y): its layer set's centre
 
     @property
     def map(self):
@@ -67,6 +73,8 @@ class MapServer:
         s = self.session
         self._decls.append(s.declare_subscriber(keys.all_vehicles("cloud"),
                                                 guarded(decode_cloud, self._enqueue, self.rejects, self.supervisor)))
+        self._decls.append(s.declare_subscriber(keys.all_vehicles("pose"),
+                                                guarded(decode_state, self._on_pose, self.rejects, self.supervisor)))
         for name in keys.SERVICES:
             self._decls.append(s.declare_queryable(f"{keys.PREFIX}/*/map/{name}",
                                                    lambda q, name=name: self._on_query(q, name)))
@@ -94,6 +102,10 @@ class MapServer:
             return
         self.queue.put(cloud)
 
+    def _on_pose(self, state: State, key: str) -> None:
+        if state.vehicle in self._where:  # other vehicles' poses are not ours to serve
+            self._where[state.vehicle] = (float(state.pose.position[0]), float(state.pose.position[1]))
+
     def _insert_one(self) -> bool:
         if (message := self.queue.get(timeout=WAIT)) is None:
             return not self.queue.closed
@@ -109,15 +121,22 @@ class MapServer:
     def layer_set(self, vehicle: str, x: float | None = None, y: float | None = None, w: int | None = None,
                   h: int | None = None, names: tuple[str, ...] | None = None) -> bytes:
         """A window's column layers, encoded once per map change: every reader asking for the same
-        window between two insertions (the periodic publisher, pilots, viewers) shares the bytes."""
+        window between two insertions (the periodic publisher, pilots, viewers) shares the bytes.
+
+        No window given: the configured one, in full only where the vehicle's pilot reads
+        (around its newest pose), as it is published.
+        """
         names = names or self.cfg.layers
         revision = self.service.clouds_inserted  # read first: a cloud landing meanwhile makes the next ask miss
-        key = (vehicle, x, y, w, h, names)
+        near = None
+        if x is None and y is None and w is None and h is None and vehicle in self._where:
+            near = self.service.detail(*self._where[vehicle], self._reach)
+        key = (vehicle, x, y, w, h, names, near)
         with self._layer_cache_lock:
             hit = self._layer_cache.get(key)
         if hit is not None and hit[0] == revision:
             return hit[1]
-        data = encode_columns(self.service.columns(x, y, w, h), self.service.last_stamp, vehicle, names)
+        data = encode_columns(self.service.columns(x, y, w, h), self.service.last_stamp, vehicle, names, near)
         with self._layer_cache_lock:
             for k in [k for k, (rev, _) in self._layer_cache.items() if rev != revision]:
                 del self._layer_cache[k]  # an older map's
