@@ -52,7 +52,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--rate", type=float, default=10.0, help="clouds per second offered")
     b.set_defaults(func=_bus)
 
-    b = benches.add_parser("photos", help="stereo from real photos vs a reference cloud, refined vs raw GNSS poses")
+    b = benches.add_parser("photos", help="stereo from real photos vs a reference cloud, adjusted vs refined vs raw poses")
     b.add_argument("--folder", type=Path, help="photo folder (default: ../shared/data/brighton_beach/images)")
     b.add_argument("--reference", type=Path, help="LAS/LAZ reference cloud (default: that folder's model.laz)")
     b.add_argument("--width", type=int, default=1000, help="working image width in pixels")

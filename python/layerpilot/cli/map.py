@@ -25,7 +25,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                         help="map frame origin (default: below the first photo at its take-off height)")
     images.add_argument("--width", type=int, default=1000, help="working image width in pixels")
     images.add_argument("--resolution", type=float, default=0.5, help="voxel size in metres")
-    images.add_argument("--raw-poses", action="store_true", help="skip the image-based pose refinement")
+    images.add_argument("--poses", choices=("adjusted", "refined", "raw"), default="adjusted",
+                        help="bundle-adjusted (default), refined per pair, or raw GNSS/attitude poses")
     images.set_defaults(func=_images)
 
 
@@ -49,7 +50,7 @@ def _images(args: argparse.Namespace) -> None:
     from layerpilot.photos import PhotoConfig, read_folder
     from layerpilot.photos.calibration import read_calibration
 
-    config = PhotoConfig(width=args.width, refine=not args.raw_poses, resolution=args.resolution)
+    config = PhotoConfig(width=args.width, poses=args.poses, resolution=args.resolution)
     folder = read_folder(args.folder, LocalFrame(*args.origin) if args.origin else None,
                          read_calibration(args.calibration) if args.calibration else None, args.width)
     for name, why in folder.skipped.items():

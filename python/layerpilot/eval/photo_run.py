@@ -25,6 +25,7 @@ from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.map import VoxelMap
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.photos import PairResult, PhotoConfig, PhotoFolder, PhotoStereo
+from layerpilot.photos.adjust import Adjustment
 from layerpilot.progress import Progress
 
 
@@ -33,7 +34,8 @@ class PhotoMap:
     folder: PhotoFolder
     map: VoxelMap
     pairs: list[PairResult]
-    cameras: np.ndarray  # (N, 3) camera centres in the map frame, photo order
+    cameras: np.ndarray  # (N, 3) camera centres in the map frame, photo order (GNSS)
+    adjustment: Adjustment | None = None  # with bundle-adjusted poses
     columns: ColumnLayers | None = None
     paths: dict[str, Path] = field(default_factory=dict)
 
@@ -47,14 +49,14 @@ def build_photo_map(folder: PhotoFolder, config: PhotoConfig = PhotoConfig(), st
     for i in range(n):
         frames.append(folder.frame(i))
         progress.update(i + 1, f"loaded {i + 1}/{n} photos")
-    pairs = PhotoStereo(config).run(frames, lambda done, total: progress.update(n + n * done / max(total, 1),
-                                                                               f"pairs {done}/{total}"))
+    stereo = PhotoStereo(config)
+    pairs = stereo.run(frames, lambda done, total: progress.update(n + n * done / max(total, 1), f"pairs {done}/{total}"))
     m = VoxelMap(config.resolution)
     for pair in pairs:
         if (c := pair.cloud) is not None:
             m.insert(c.points, c.origin, c.colors, c.stamp, config.match.max_depth)
     progress.close(f"pairs {sum(p.accepted for p in pairs)}/{len(pairs)} accepted")
-    result = PhotoMap(folder, m, pairs, np.array([f.pose.position for f in frames]).reshape(-1, 3))
+    result = PhotoMap(folder, m, pairs, np.array([f.pose.position for f in frames]).reshape(-1, 3), stereo.adjustment)
     result.columns = map_columns(result)
     return result
 
@@ -80,6 +82,18 @@ def pair_rows(pairs: list[PairResult], folder: PhotoFolder) -> list[dict]:
                      "points": len(p.cloud) if p.cloud is not None else 0,
                      "overlap_coverage": "" if math.isnan(p.coverage) else round(p.coverage, 3)})
     return rows
+
+
+def adjustment_rows(adj: Adjustment) -> list[list]:
+    """What the bundle adjustment did, as (quantity, value) rows."""
+    focal, k1, k2 = adj.lens
+    return [["photos adjusted", sum(f is not None for f in adj.frames)], ["verified photo pairs", len(adj.links)],
+            ["tracks (3+ photos)", adj.tracks], ["observations", adj.observations],
+            ["reprojection rms before / after (px)", f"{adj.rms_before_px:.2f} / {adj.rms_after_px:.2f}"],
+            ["headings turned half a turn", sum(adj.flipped)],
+            ["focal factor, k1, k2", f"{focal:.4f}, {k1:.4f}, {k2:.4f}"],
+            ["largest camera shift from GNSS (m)", f"{np.nanmax(adj.position_shift_m):.2f}"
+             if np.isfinite(adj.position_shift_m).any() else "-"]]
 
 
 def write_photo_run(photo_map: PhotoMap, out: str | Path, title: str) -> dict[str, Path]:
@@ -114,6 +128,9 @@ def write_photo_run(photo_map: PhotoMap, out: str | Path, title: str) -> dict[st
                                         ["voxel size (m)", photo_map.map.resolution]])
     if folder.skipped:
         report.table(["skipped photo", "why"], [[k, v] for k, v in folder.skipped.items()])
+    if (adj := photo_map.adjustment) is not None:
+        report.heading("Bundle adjustment")
+        report.table(["quantity", "value"], adjustment_rows(adj))
     report.heading("Pairs")
     report.table(list(rows[0]) if rows else ["pairs"], [list(r.values()) for r in rows])
     report.heading("Camera positions over the color layer")
@@ -125,6 +142,7 @@ def write_photo_run(photo_map: PhotoMap, out: str | Path, title: str) -> dict[st
     metrics = {"final": {"photos": len(folder.photos), "pairs": len(rows),
                          "accepted": sum(p.accepted for p in photo_map.pairs),
                          "observed_columns": int(cols.observed.sum())},
-               "settings": {"skipped": folder.skipped, "pairs": rows}}
+               "settings": {"skipped": folder.skipped, "pairs": rows,
+                            "adjustment": dict(adjustment_rows(photo_map.adjustment)) if photo_map.adjustment else None}}
     photo_map.paths = report.write(out, metrics)
     return photo_map.paths

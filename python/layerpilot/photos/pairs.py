@@ -1,8 +1,9 @@
-"""Stereo from a flight's photos: pick pairs, refine their relative pose, match, triangulate.
+"""Stereo from a flight's photos: adjust all poses (or refine per pair), pick pairs, match, triangulate.
 
 The frame picker, rectification, semi-global matching, filters and back-projection are
-``layerpilot.depth``'s; this module puts the image-based pose refinement (``photos.refine``)
-between picking and matching, and says per pair what happened.
+``layerpilot.depth``'s; this module puts the image-based poses in front of them - the bundle
+adjustment of all photos (``photos.adjust``, the default) or the per-pair refinement
+(``photos.refine``) - and says per pair what happened.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from layerpilot.depth.picking import FramePicker, PickResult
 from layerpilot.depth.stereo import Disparity, StereoMatcher
 from layerpilot.geometry import CameraFrame, PointCloud
+from layerpilot.photos.adjust import Adjustment, BundleAdjuster
 from layerpilot.photos.config import PhotoConfig
 from layerpilot.photos.refine import PoseRefiner, Refinement
 
@@ -27,17 +29,14 @@ class PairResult:
     ref: int  # photo indices
     partner: int
     baseline_ratio: float
-    refinement: Refinement | None  # None with raw poses
+    refinement: Refinement | None  # None unless refined per pair
     cloud: PointCloud | None  # None when rejected
     coverage: float  # share of the pair's overlap (on the matching grid) that got a depth
+    reason: str  # "raw", "adjusted", or the refinement's result
 
     @property
     def accepted(self) -> bool:
         return self.cloud is not None
-
-    @property
-    def reason(self) -> str:
-        return "raw" if self.refinement is None else self.refinement.reason
 
 
 def overlap_coverage(disp: Disparity, scene_depth: float) -> float:
@@ -61,31 +60,43 @@ class PhotoStereo:
         self.config = config
         self.picker = FramePicker(config.pick)
         self.refiner = PoseRefiner(config.refinement)
+        self.adjuster = BundleAdjuster(config.adjustment, self.refiner)
+        self.adjustment: Adjustment | None = None  # the last run's, with adjusted poses
         self.matcher = StereoMatcher(config.match)
 
-    def picks(self, frames: Sequence[CameraFrame]) -> list[tuple[int, PickResult]]:
-        """(photo index, pick) for every photo the picker found a partner for."""
+    def picks(self, frames: Sequence[CameraFrame | None]) -> list[tuple[int, PickResult]]:
+        """(photo index, pick) for every photo the picker found a partner for (None: a photo left out)."""
         out = []
         for i, frame in enumerate(frames):
-            if (pick := self.picker.push(frame)).partner is not None:
+            if frame is not None and (pick := self.picker.push(frame)).partner is not None:
                 out.append((i, pick))
         return out
 
     def pair(self, frames: Sequence[CameraFrame], i: int, pick: PickResult) -> PairResult:
-        """Refine (unless configured off), match and triangulate photo ``i`` with its picked partner."""
+        """Refine (if so configured), match and triangulate photo ``i`` with its picked partner."""
         j = int(pick.partner.stamp)
         ref, partner, refinement = frames[i], pick.partner, None
-        if self.config.refine:
+        reason = "raw" if self.config.poses == "raw" else "adjusted"
+        if self.config.poses == "refined":
             refinement = self.refiner.refine(ref, partner)
+            reason = refinement.reason
             if refinement.ref is None or refinement.partner is None:
-                return PairResult(i, j, pick.baseline_ratio, refinement, None, math.nan)
+                return PairResult(i, j, pick.baseline_ratio, refinement, None, math.nan, reason)
             ref, partner = refinement.ref, refinement.partner
         cloud, disp = self.matcher.cloud(ref, partner)
-        return PairResult(i, j, pick.baseline_ratio, refinement, cloud, overlap_coverage(disp, pick.scene_depth))
+        return PairResult(i, j, pick.baseline_ratio, refinement, cloud, overlap_coverage(disp, pick.scene_depth),
+                          reason)
 
     def run(self, frames: Sequence[CameraFrame], progress: Callable[[int, int], None] | None = None
             ) -> list[PairResult]:
-        """Every picked pair's result; ``progress(done, total)`` after each pair."""
+        """Every picked pair's result; ``progress(done, total)`` after each pair.
+
+        With adjusted poses the whole flight is adjusted first; photos the adjustment could not
+        tie in (no verified pair) take part in no pair."""
+        if self.config.poses == "adjusted":
+            self.refiner.cache_size = max(self.refiner.cache_size, len(frames))
+            self.adjustment = self.adjuster.adjust(frames)
+            frames = self.adjustment.frames
         picks = self.picks(frames)
         results = []
         for k, (i, pick) in enumerate(picks):

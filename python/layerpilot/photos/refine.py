@@ -65,11 +65,13 @@ class PoseRefiner:
         self._matcher = cv2.BFMatcher(cv2.NORM_L2)
         # id(image) -> (image, points, descriptors); holding the image keeps its id from being reused
         self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.cache_size = 8  # frames; the bundle adjustment raises it to the flight's photo count
 
-    def _features(self, frame: CameraFrame) -> tuple[np.ndarray, np.ndarray]:
+    def features(self, frame: CameraFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Keypoint pixels (N, 2) and SIFT descriptors of a frame, cached by its image."""
         key = id(frame.image)
         if key not in self._cache:
-            if len(self._cache) > 8:
+            if len(self._cache) > self.cache_size:
                 self._cache.pop(next(iter(self._cache)))
             kp, desc = self._sift.detectAndCompute(_grey(frame), None)
             self._cache[key] = (frame.image, np.float32([k.pt for k in kp]).reshape(-1, 2),
@@ -78,7 +80,7 @@ class PoseRefiner:
 
     def matches(self, ref: CameraFrame, other: CameraFrame) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates (N, 2) of ratio-test matches in ``ref`` and ``other``."""
-        (pa, da), (pb, db) = self._features(ref), self._features(other)
+        (pa, da), (pb, db) = self.features(ref), self.features(other)
         if len(da) < 2 or len(db) < 2:
             return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32)
         pairs = [m for m, n in (p for p in self._matcher.knnMatch(da, db, k=2) if len(p) == 2)
