@@ -10,13 +10,14 @@ from collections import Counter
 
 import numpy as np
 import pytest
+import zenoh
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.recording import Recorder, RecordingReader
-from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import PointCloud, Pose
 from conftest import wait_for
 
@@ -52,10 +53,11 @@ def recorded(tmp_path_factory):
         publishers = {key: nodes.declare_publisher(key) for key in {k for k, _ in sent}}
         wait_for(lambda: all(p.matching_status.matching for p in publishers.values()), "the recorder's subscription",
                  timeout=60.0)
-        for key, payload in sent:
-            publish(nodes, key, payload)
-        publish(nodes, "layerpilot/uav1/unknown", b"\x08\x01")  # not one of ours: rejected, not recorded
-        publish(nodes, "layerpilot/uav1/health/nobody", sent[-1][1])  # no such node: rejected too
+        # Blocking puts, unlike the nodes' lossy topics: this checks the recorder, not the topics' QoS.
+        extra = [("layerpilot/uav1/unknown", b"\x08\x01"),  # not one of ours: rejected, not recorded
+                 ("layerpilot/uav1/health/nobody", sent[-1][1])]  # no such node: rejected too
+        for key, payload in sent + extra:
+            nodes.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
         wait_for(lambda: sum(recorder.writer.written.values()) + recorder.writer.rejects.total >= len(sent) + 2,
                  "every message at the recorder", timeout=60.0)
         summary = recorder.stop()
