@@ -110,7 +110,8 @@ snapshot_period = 2.0
         now = json.loads((tmp_path / "state" / "uav1.json").read_text())
         assert now["mission_id"] == saved["mission_id"] and now["reached"] >= saved["reached"]
         assert now["ticks"][:len(saved["ticks"])] == saved["ticks"] and len(now["ticks"]) > len(saved["ticks"])
-        assert "continuing (restarted) the survey saved at mission time" in (tmp_path / "logs" / "decide-uav1.log").read_text()
+        log = (tmp_path / "logs" / "decide-uav1.log").read_text()
+        assert "continuing (restarted) the survey saved at mission time" in log
         assert 987654 not in {w.seq for w in waypoints}  # the hub never let the outsider's waypoint through
         assert final.leaves > before.leaves  # the map kept growing after the crash
         assert final.clouds_dropped == 0

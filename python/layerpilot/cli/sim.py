@@ -57,8 +57,8 @@ def _node(args, mission, vehicle, session) -> Running:
                        clock=clock_from_args(args))
     except OSError as exc:  # the MAVLink port is taken or the address is wrong
         raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
-    return Running(lambda: {"frames": node.frames, "time": round(node.clock(node.sim.time), 2)}, info=node.describe(),
-                   run=node.run)
+    return Running(lambda: {"frames": node.frames, "time": round(node.clock(node.sim.time), 2)},
+                   info=node.describe(), run=node.run)
 
 
 def _preview(args: argparse.Namespace) -> None:

@@ -10,11 +10,12 @@ acknowledge it, so an armed vehicle is never left in GUIDED with nothing supervi
 autopilot (told apart from a pilot takeover by the link) ends the flying (``on_reboot = "end"``) or
 pauses it until a pilot has the vehicle armed, airborne and in GUIDED again (``"pause"``). When the
 pilot turns home for the battery (the mission state's phase ``return: battery``) the node commands
-RTL at once: the autopilot flies home and lands, and the mission's end leaves it so; the same when
-the autopilot's own battery failsafe took the vehicle home (``link.failsafe``: not a takeover). Pose stamps are the autopilot's
-clock (time_boot_ms) on the mission clock (mission.clock: + the saved mission time when a survey
-resumes): the simulator node stamps its camera frames, and so the clouds and layer sets, with the
-same clock, at any speed; in camera-only mode the frames take the pose's stamp.
+RTL at once: the autopilot flies home and lands, and the mission's end leaves it so. When the
+autopilot's own battery failsafe took the vehicle home (``link.failsafe``: not a takeover) the
+node ends the mission the same way, leaving the autopilot's RTL alone. Pose stamps are the
+autopilot's clock (time_boot_ms) on the mission clock (mission.clock: + the saved mission time
+when a survey resumes): the simulator node stamps its camera frames, and so the clouds and layer
+sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
 """
 
 from __future__ import annotations
@@ -187,7 +188,8 @@ class LinkNode:
         if t.link_ok:
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
-                self.mission_clock(t.boot_time), self.keys.vehicle, Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
+                self.mission_clock(t.boot_time), self.keys.vehicle,
+                Pose.from_euler(t.roll, t.pitch, t.yaw, t.position), t.velocity,
                 t.armed, t.mode, battery)))
             self.poses += 1
         return True

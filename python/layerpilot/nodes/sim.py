@@ -37,7 +37,8 @@ def publish_frame(session: zenoh.Session, k: keys.Keys, seq: int, frame: CameraF
 
 class SimNode:
     def __init__(self, session: zenoh.Session, vehicle: str, sim_config, *, speed: float = 1.0,
-                 duration: float | None = None, publish_depth: bool = True, clock: MissionClock = MissionClock()) -> None:
+                 duration: float | None = None, publish_depth: bool = True,
+                 clock: MissionClock = MissionClock()) -> None:
         """``clock``: the frames' stamps on the mission clock (the vehicle's clock + its start, mission.clock)."""
         from layerpilot.sim.simulator import Simulator
 
