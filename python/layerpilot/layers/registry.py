@@ -9,6 +9,10 @@ and lists the module that registers it under ``plugins``. See docs/layers.md.
 A decision needs the layers only near the drone (a ``GridWindow``). A layer registered
 with ``windowed=True`` takes a ``window`` keyword and computes just those cells (the same
 values as the whole grid's); any other layer is computed whole and cut to the window.
+
+A layer registered with ``needs`` (names of ``LayerContext`` fields, e.g. the camera view)
+is part of the default set only when the context carries them; named explicitly without
+them, its function says what is missing.
 """
 
 from __future__ import annotations
@@ -62,18 +66,23 @@ class LayerContext:
 LayerFunction = Callable[[ColumnLayers, Any, LayerContext], np.ndarray]
 _REGISTRY: dict[str, LayerFunction] = {}
 _WINDOWED: set[str] = set()  # layers whose function takes a ``window`` keyword
+_NEEDS: dict[str, tuple[str, ...]] = {}  # LayerContext fields a layer cannot do without
 RESERVED = frozenset({"color", "observed", "elevation_m"})
 
 
 def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool = False,
-                   windowed: bool = False) -> Any:
+                   windowed: bool = False, needs: Iterable[str] = ()) -> Any:
     """Add a layer under ``name``; usable as ``register_layer(name, fn)`` or ``@register_layer(name)``.
 
     ``windowed``: ``fn`` also takes ``window=`` (a ``GridWindow`` or None) and then returns
-    only those cells.
+    only those cells. ``needs``: the ``LayerContext`` fields it cannot be computed without.
     """
     if not name.isidentifier() or name in RESERVED:
         raise ValueError(f"name: {name!r} must be a Python-identifier-like word and not one of {sorted(RESERVED)}")
+    needs = tuple(needs)
+    fields = set(LayerContext.__dataclass_fields__)
+    if unknown := [n for n in needs if n not in fields]:
+        raise ValueError(f"needs: {unknown} are not LayerContext fields ({sorted(fields)})")
 
     def add(f: LayerFunction) -> LayerFunction:
         if name in _REGISTRY and _REGISTRY[name] is not f and not replace:
@@ -82,6 +91,7 @@ def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool 
         _WINDOWED.discard(name)
         if windowed:
             _WINDOWED.add(name)
+        _NEEDS[name] = needs
         return f
 
     return add if fn is None else add(fn)
@@ -90,10 +100,14 @@ def register_layer(name: str, fn: LayerFunction | None = None, *, replace: bool 
 def unregister_layer(name: str) -> None:
     _REGISTRY.pop(name, None)
     _WINDOWED.discard(name)
+    _NEEDS.pop(name, None)
 
 
-def layer_names() -> list[str]:
-    return list(_REGISTRY)
+def layer_names(context: LayerContext | None = None) -> list[str]:
+    """Every registered layer; given a ``context``, only those it carries everything for."""
+    if context is None:
+        return list(_REGISTRY)
+    return [n for n in _REGISTRY if all(getattr(context, field) is not None for field in _NEEDS[n])]
 
 
 def load_plugins(plugins: Iterable[str], base: Path | None = None) -> None:
@@ -127,11 +141,11 @@ def compute_layers(
     voxel_map: Any = None,
     window: GridWindow | None = None,
 ) -> LayerSet:
-    """Compute the named layers (default: every registered one) into a checked LayerSet.
+    """Compute the named layers (default: every one the context allows) into a checked LayerSet.
 
     ``window``: only those cells of each layer (see the module docstring).
     """
-    names = layer_names() if names is None else list(dict.fromkeys(names))
+    names = layer_names(context) if names is None else list(dict.fromkeys(names))
     unknown = [n for n in names if n not in _REGISTRY]
     if unknown:
         raise ValueError(f"names: no layer named {', '.join(map(repr, unknown))}; known: {', '.join(_REGISTRY)}")
@@ -168,4 +182,4 @@ register_layer("distance", lambda c, m, ctx, window=None: features.min_distance(
     c.observed, c.min_distance, ctx.options.max_distance, window), windowed=True)
 register_layer("elevation", lambda c, m, ctx, window=None: features.elevation(
     c.observed, c.elevation, window, c.value_range("elevation")), windowed=True)
-register_layer("view_gain", view_gain.layer)
+register_layer("view_gain", view_gain.layer, needs=("view", "aoi"))

@@ -50,7 +50,7 @@ def render_scene(
     if position is None:
         position = tuple(path_positions[-1]) if path_positions else (home[0], home[1], behavior.altitude)
     context = LayerContext(now=now, home=home, position=position, options=behavior.layers)
-    layers = compute_layers(columns, context, layer_names(), voxel_map=m)
+    layers = compute_layers(columns, context, layer_names(context), voxel_map=m)
     for k, earlier in enumerate(path_positions[:-1]):
         dm.decide(layers, earlier, now - len(path_positions) + k)
     decision = dm.decide(layers, position, now, intermediates=True)
