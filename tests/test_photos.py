@@ -1,4 +1,5 @@
-"""Real photos in (issue 17): EXIF/XMP, skipped photos, refinement against the reference cloud, `map images`.
+"""Real photos in (issue 17): EXIF/XMP, skipped photos, refinement and bundle adjustment against the reference
+cloud, `map images`.
 
 Uses the real DJI Phantom 3 photos in ../shared/data/brighton_beach; expected metadata values were
 read by hand with exifread and from the XMP packet of DJI_0018.JPG.
@@ -16,7 +17,8 @@ import pytest
 
 from layerpilot.cli import main as cli_main
 from layerpilot.eval.surface import read_reference, score_points
-from layerpilot.photos import PhotoConfig, PhotoStereo, read_folder, read_metadata
+from layerpilot.photos import PhotoConfig, PhotoStereo, RefineConfig, read_folder, read_metadata
+from layerpilot.photos.config import AdjustConfig
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "brighton_beach"
 PAIR = ("DJI_0025.JPG", "DJI_0026.JPG")  # second flight line, over the park the reference covers
@@ -65,7 +67,7 @@ def test_refinement_beats_raw_poses_against_the_reference(folder):
     surface = read_reference(DATA / "model.laz", f.origin)
     scores = {}
     for refine in (True, False):
-        (pair,) = PhotoStereo(replace(PhotoConfig(), refine=refine)).run(frames)
+        (pair,) = PhotoStereo(replace(PhotoConfig(), poses="refined" if refine else "raw")).run(frames)
         scores[refine] = (score_points(surface, pair.cloud.points), pair)
     refined, raw = scores[True][0], scores[False][0]
     r = scores[True][1].refinement
@@ -75,9 +77,44 @@ def test_refinement_beats_raw_poses_against_the_reference(folder):
     assert scores[True][1].coverage > 3 * scores[False][1].coverage
 
 
+def test_bundle_adjustment_beats_pairwise_refinement_against_the_reference():
+    """All 12 photos (640 px, 4000 features): one adjusted block against one GNSS baseline per pair.
+
+    The reference only scores; the pipeline never sees it."""
+    f = read_folder(DATA / "images", width=640)
+    frames = list(f.frames())
+    surface = read_reference(DATA / "model.laz", f.origin)
+    config = PhotoConfig(width=640, refinement=RefineConfig(features=4000))
+    pooled, results = {}, {}
+    for poses in ("adjusted", "refined"):
+        stereo = PhotoStereo(replace(config, poses=poses))
+        pairs = stereo.run(frames)
+        scores = [score_points(surface, p.cloud.points) for p in pairs if p.cloud is not None]
+        scored = sum(s.scored for s in scores)
+        pooled[poses] = sum(s.within_1m * s.scored for s in scores) / scored
+        results[poses] = (pairs, stereo.adjustment)
+    pairs, adj = results["adjusted"]
+    assert all(p.reason == "adjusted" for p in pairs) and len(pairs) == 10
+    assert sum(p.accepted for p in results["refined"][0]) == 5  # the forest line's pairs are rejected
+    # the second line's recorded heading is half a turn off: the vote turns exactly its six photos
+    assert adj.flipped == [False] * 6 + [True] * 6
+    assert adj.tracks > 200 and adj.rms_after_px < 1.0 < adj.rms_before_px
+    assert max(adj.position_shift_m) < 2.0  # GNSS stays a prior: no camera wanders off
+    assert pooled["adjusted"] > 0.85 and pooled["adjusted"] > 2 * pooled["refined"]
+
+
+def test_adjust_config_names_a_bad_value():
+    with pytest.raises(ValueError, match="gnss_sigma_v"):
+        AdjustConfig(gnss_sigma_v=0.0)
+    with pytest.raises(ValueError, match="loss"):
+        AdjustConfig(loss="square")
+    with pytest.raises(ValueError, match="poses"):
+        PhotoConfig(poses="gnss")
+
+
 def test_map_images_writes_the_run_directory(folder, tmp_path, capsys):
     out = tmp_path / "run"
-    cli_main(["map", "images", str(folder), "--out", str(out), "--width", "640"])
+    cli_main(["map", "images", str(folder), "--out", str(out), "--width", "640", "--poses", "refined"])
     printed = capsys.readouterr().out
     assert "skipped DJI_NOGPS.JPG: no GPS position in EXIF" in printed
     for name in ("map.ot", "map.bt", "frame.json", "cameras.csv", "pairs.csv", "report.html", "metrics.json",
