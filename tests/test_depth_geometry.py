@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from layerpilot.depth import GroundTruthDepth, MatchConfig, StereoDepth, StereoMatcher, make_source, rectify
+from layerpilot.depth.backproject import camera_points_to_cloud
 from layerpilot.depth.evaluate import score
 from layerpilot.eval.fixtures import noise_texture, plane_frame
 from layerpilot.geometry import CameraFrame, CameraIntrinsics
@@ -97,6 +98,27 @@ def test_ground_truth_source_backprojects_exactly(texture):
     s = score(cloud, ref)
     assert s.precision == 1.0 and s.coverage == 1.0
     assert GroundTruthDepth().push(CameraFrame(ref.image, ref.pose, ref.intrinsics, 0.0)) is None
+
+
+def test_ground_truth_source_equals_the_plain_backprojection_bit_for_bit(texture):
+    """Every mission frame is back-projected for the evaluation's reference map: the fast path must
+    give exactly the points and colors of rays(u, v) * z over the valid pixels."""
+    ref, _ = _pair(texture, (2.0, 0.0, 0.0), pitch=60.0)
+    depth = ref.depth.copy()
+    depth[:40] = np.inf
+    depth[40:50, :100], depth[60:70, :100] = np.nan, 0.0
+    depth[70:80, :100] = 150.0  # beyond max_depth
+    frame = CameraFrame(ref.image, ref.pose, ref.intrinsics, 2.0, depth)
+    for stride in (1, 3):
+        d = depth[::stride, ::stride]
+        v, u = np.nonzero(np.isfinite(d) & (d > 0) & (d <= 100.0))
+        z = d[v, u].astype(np.float64)
+        u, v = u * stride, v * stride
+        plain = camera_points_to_cloud(frame, frame.intrinsics.rays(u, v) * z[:, None], frame.image[v, u])
+        cloud = GroundTruthDepth(max_depth=100.0, stride=stride).push(frame)
+        assert len(cloud.points) == len(plain.points) > 1000
+        np.testing.assert_array_equal(cloud.points, plain.points)
+        np.testing.assert_array_equal(cloud.colors, plain.colors)
 
 
 def test_make_source_by_name():

@@ -59,8 +59,9 @@ def test_nearest_distances_matches_brute_force() -> None:
     ref = rng.uniform(-30, 30, (2000, 3))
     pts = np.concatenate([rng.uniform(-40, 40, (1500, 3)), [[500.0, -300.0, 20.0]]])  # one far outlier
     brute = np.sqrt(((pts[:, None, :] - ref[None, :, :]) ** 2).sum(-1)).min(1)
-    np.testing.assert_allclose(nearest_distances(pts, ref, cell=4.0), brute, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(nearest_distances(pts, ref, cell=0.5), brute, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(nearest_distances(pts, ref), brute, rtol=0, atol=1e-9)
+    exact = nearest_distances(np.array([[3.0, 4.0, 0.0]]), np.zeros((1, 3)), max_distance=5.0)
+    assert exact[0] == 5.0  # a neighbour at exactly max_distance counts
     assert np.isinf(nearest_distances(pts[:3], np.zeros((0, 3)))).all()
     with pytest.raises(ValueError, match="reference"):
         nearest_distances(pts, ref[:, :2])
@@ -123,8 +124,8 @@ def test_nearest_distances_max_distance_stops_early_but_stays_exact_within() -> 
     rng = np.random.default_rng(5)
     ref = rng.uniform(0, 10, (300, 3))
     pts = np.concatenate([rng.uniform(0, 10, (200, 3)), rng.uniform(100, 120, (50, 3))])
-    full = nearest_distances(pts, ref, cell=1.0)
-    capped = nearest_distances(pts, ref, cell=1.0, max_distance=4.0)
+    full = nearest_distances(pts, ref)
+    capped = nearest_distances(pts, ref, max_distance=4.0)
     near = full <= 4.0
     np.testing.assert_array_equal(capped[near], full[near])
     assert np.isinf(capped[~near]).all() and (~near).sum() == 50

@@ -62,12 +62,18 @@ class GroundTruthDepth:
             return None
         s = self.stride
         depth = frame.depth[::s, ::s]
-        v, u = np.nonzero(np.isfinite(depth) & (depth > 0) & (depth <= self.max_depth))
-        z = depth[v, u].astype(np.float64)
-        u, v = u * s, v * s
-        cam = frame.intrinsics.rays(u, v) * z[:, None]
+        valid = depth > 0  # NaN and inf fail one of the two comparisons
+        valid &= depth <= self.max_depth
+        flat = np.flatnonzero(valid)  # one pass over the pixels; every frame of a mission comes here
+        v, u = np.divmod(flat, depth.shape[1])
+        z = depth.ravel()[flat].astype(np.float64)
+        k = frame.intrinsics
+        cam = np.empty((len(flat), 3))  # rays(u, v) * z, with each row's and column's ray part computed once
+        np.multiply(((np.arange(0, k.width, s, dtype=np.float64) - k.cx) / k.fx)[u], z, out=cam[:, 0])
+        np.multiply(((np.arange(0, k.height, s, dtype=np.float64) - k.cy) / k.fy)[v], z, out=cam[:, 1])
+        cam[:, 2] = z
         self.frames += 1
-        return camera_points_to_cloud(frame, cam, frame.image[v, u])
+        return camera_points_to_cloud(frame, cam, frame.image[::s, ::s].reshape(-1, 3)[flat])
 
     def stats(self) -> dict[str, int]:
         return {"frames": self.frames, "skipped_no_depth": self.skipped_no_depth}
