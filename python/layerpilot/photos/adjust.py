@@ -225,7 +225,7 @@ class BundleAdjuster:
         fitted = np.flatnonzero(lens_sigma > 0)  # which of the lens parameters are free
         nl = len(fitted)
         sig_pos = np.array([c.gnss_sigma_h, c.gnss_sigma_h, c.gnss_sigma_v])
-        sig_rot = math.radians(c.attitude_sigma_deg)
+        sig_rot = np.radians([c.tilt_sigma_deg, c.tilt_sigma_deg, c.yaw_sigma_deg])  # map-frame x, y (tilt), z (yaw)
         f0, cx, cy = K[0, 0], K[0, 2], K[1, 2]
         used_mask = np.zeros(n, bool)
         used_mask[used] = True

@@ -49,7 +49,8 @@ class AdjustConfig:
     pixel_sigma: float = 1.0  # reprojection error scale, pixels at the working scale
     gnss_sigma_h: float = 0.5  # GNSS position prior, metres
     gnss_sigma_v: float = 0.2  # GPS altitude follows the barometric height within 0.1 m
-    attitude_sigma_deg: float = 10.0  # attitude prior (after the heading vote)
+    tilt_sigma_deg: float = 1.0  # attitude prior on the camera's tilt (the stabilised gimbal's pitch and roll)
+    yaw_sigma_deg: float = 10.0  # ... and on its heading (after the heading vote; the compass is poor)
     focal_sigma: float = 0.0  # > 0: also fit one focal-length factor with this prior sigma
     distortion_sigma: float = 0.2  # > 0: also fit radial distortion k1, k2 (prior 0 with this sigma)
     loss: str = "soft_l1"
@@ -65,7 +66,7 @@ class AdjustConfig:
         check_range("max_rotation_deg", self.max_rotation_deg, 0.0, 180.0)
         check_range("max_direction_deg", self.max_direction_deg, 0.0, 180.0)
         check_range("min_track", self.min_track, 2)
-        for name in ("pixel_sigma", "gnss_sigma_h", "gnss_sigma_v", "attitude_sigma_deg", "loss_scale"):
+        for name in ("pixel_sigma", "gnss_sigma_h", "gnss_sigma_v", "tilt_sigma_deg", "yaw_sigma_deg", "loss_scale"):
             check_range(name, getattr(self, name), 1e-6)
         check_range("focal_sigma", self.focal_sigma, 0.0)
         check_range("distortion_sigma", self.distortion_sigma, 0.0)
