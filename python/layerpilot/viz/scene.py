@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from functools import cache
 
 import numpy as np
 import rerun as rr
@@ -26,6 +27,7 @@ COLOR_MODES = ("color", "height", "age")  # how occupied voxels are coloured
 MAX_BOXES = 50_000  # beyond this many voxels the map is drawn as points (boxes cost the viewer more)
 MAX_PATH = 20_000  # path vertices kept (the oldest go first)
 TIMELINE = "mission"
+AGGREGATE_LEVELS = 32  # colours an aggregate layer is drawn in: a quarter of the PNG bytes of a smooth ramp
 
 
 def colormap(values: np.ndarray, name: str = "viridis", lo: float | None = None,
@@ -45,12 +47,19 @@ def colormap(values: np.ndarray, name: str = "viridis", lo: float | None = None,
     return rgb
 
 
-def encoded(rgb: np.ndarray, suffix: str, draw_order: float | None = None) -> rr.EncodedImage:
+@cache
+def aggregate_colors() -> np.ndarray:
+    """RGBA per aggregate step: 0 transparent (the cell scores 0), then the colormap from 0 to the tick's maximum."""
+    ramp = colormap(np.arange(AGGREGATE_LEVELS + 1.0), "inferno")
+    return np.vstack([np.zeros((1, 4), np.uint8), np.column_stack([ramp, np.full(len(ramp), 255, np.uint8)])])
+
+
+def encoded(rgb: np.ndarray, suffix: str, draw_order: float | None = None, params: Sequence[int] = ()) -> rr.EncodedImage:
     """An RGB(A) image compressed (PNG for layers, JPEG for camera frames): an .rrd of a long run stays small."""
     import cv2
 
     bgr = cv2.cvtColor(rgb, cv2.COLOR_RGBA2BGRA) if rgb.shape[-1] == 4 else rgb[..., ::-1]
-    ok, data = cv2.imencode(suffix, np.ascontiguousarray(bgr))
+    ok, data = cv2.imencode(suffix, np.ascontiguousarray(bgr), list(params))
     if not ok:
         raise ValueError(f"image: OpenCV could not encode a {rgb.shape} image as {suffix}")
     return rr.EncodedImage(contents=data.tobytes(), media_type="image/png" if suffix == ".png" else "image/jpeg",
@@ -112,15 +121,20 @@ class MissionScene:
 
     def aggregates(self, images: Mapping[str, np.ndarray], placement: GridGeometry, under: GridGeometry) -> None:
         """The decision's A0..A3 (``layers/A0`` ...) on the window a tick computed (``placement``, map frame),
-        drawn in place over the layer images of grid ``under``; cells scoring 0 are transparent."""
+        drawn in place over the layer images of grid ``under``; cells scoring 0 are transparent. Values are drawn
+        in AGGREGATE_LEVELS steps of the tick's own maximum (a picture of where the score is high)."""
+        import cv2
+
         scale = placement.resolution / under.resolution
         left = (placement.origin_x - under.origin_x) / under.resolution
         top = (under.extent[3] - placement.extent[3]) / under.resolution  # images are north up
         for name, values in images.items():
-            v = np.asarray(values, np.float64)
-            rgba = np.dstack([colormap(v, "inferno", 0.0), np.where(np.isfinite(v) & (v > 0), 255, 0)])
+            v = np.nan_to_num(np.asarray(values, np.float64), nan=0.0)
+            high = float(v.max(initial=0.0))
+            steps = np.where(v > 0, np.rint(v * (AGGREGATE_LEVELS / high)) + 1, 0) if high > 0 else np.zeros(v.shape)
             self.stream.log(f"layers/{name}", rr.Transform3D(translation=[left, top, 0.0], scale=[scale, scale, 1.0]))
-            self.stream.log(f"layers/{name}", encoded(rgba[::-1].astype(np.uint8), ".png", draw_order=10.0))
+            self.stream.log(f"layers/{name}", encoded(aggregate_colors()[steps[::-1].astype(np.intp)], ".png",
+                                                      draw_order=10.0, params=(cv2.IMWRITE_PNG_COMPRESSION, 6)))
 
     def pose(self, pose: Pose) -> None:
         """The drone (body -> map); its position is the path's next vertex (see ``path``)."""
