@@ -54,6 +54,10 @@ def test_hostile_lz4_is_refused_with_the_reason() -> None:
     huge = pb.Array(dtype="float32", shape=[1 << 30], data=bomb, compression=pb.Array.LZ4)
     with pytest.raises(BadMessage, match="too large"):
         arrays.from_proto(huge, "x")
+    # within the item limit (2^28) but 2 GiB of float64: past what an LZ4 block can hold (was an OverflowError)
+    at_limit = pb.Array(dtype="float64", shape=[1 << 28], data=bomb, compression=pb.Array.LZ4)
+    with pytest.raises(BadMessage, match="x: .*more than an LZ4 block holds"):
+        arrays.from_proto(at_limit, "x")
 
 
 def test_map_server_encodes_a_window_once_per_map_change() -> None:

@@ -19,6 +19,7 @@ from layerpilot.bus.reject import BadMessage
 
 DTYPES = ("bool", "uint8", "uint16", "float16", "float32", "float64")
 MAX_ITEMS = 1 << 28  # no honest message holds more; guards memory against forged shapes
+LZ4_MAX_BYTES = 0x7E000000  # LZ4_MAX_INPUT_SIZE: a block never inflates to more (2^28 float64 would overflow it)
 
 
 CODECS = {"none": pb.Array.NONE, "zlib": pb.Array.ZLIB, "lz4": pb.Array.LZ4}
@@ -76,9 +77,12 @@ def from_proto(msg: pb.Array, name: str, *, dtype: str | tuple[str, ...] | None 
         except zlib.error as exc:
             raise BadMessage("bad compression", f"{name}: zlib: {exc}") from None
     elif msg.compression == pb.Array.LZ4:
+        if expected > LZ4_MAX_BYTES:
+            raise BadMessage("too large", f"{name}: shape {dims} of {msg.dtype} is {expected} bytes, "
+                                          f"more than an LZ4 block holds ({LZ4_MAX_BYTES})")
         try:  # the output buffer is the declared size: a forged block cannot inflate past it
             data = lz4.block.decompress(data, uncompressed_size=max(expected, 1))
-        except lz4.block.LZ4BlockError as exc:
+        except (lz4.block.LZ4BlockError, OverflowError, ValueError) as exc:
             raise BadMessage("bad compression", f"{name}: lz4: {exc}") from None
     elif msg.compression != pb.Array.NONE:
         raise BadMessage("bad compression", f"{name}: unknown compression {msg.compression}")
