@@ -36,8 +36,8 @@ from layerpilot.viz.scene import MissionScene, area_outline
 
 _log = logging.getLogger("layerpilot.view")
 DECODERS = {"camera": msg.decode_frame, "pose": msg.decode_state, "layers": decode_layer_set,
-            "decision": msg.decode_decision, "waypoint": msg.decode_waypoint, "state": msg.decode_mission_state,
-            "cloud": msg.decode_cloud}
+            "decision": msg.decode_decision, "waypoint": msg.decode_waypoint, "state": msg.decode_mission_state}
+# no clouds: they are the map server's, the view shows its map (and a cloud crossing a ground link costs MBs)
 VOXEL_BOX = 500  # voxels per side of the box the view asks the map server for
 Metrics = Callable[[ColumnLayers, np.ndarray, float], dict[str, float]]
 
@@ -70,8 +70,8 @@ class LiveView:
         self.scene.area(area_outline(self.behavior.area.shape, self.behavior.area.radius,
                                      self.behavior.area.center or self.mission.decide.home,
                                      self.behavior.area.polygon))
-        self._subs = [self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/*", self._on_sample),
-                      self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/health/*", self._on_health)]
+        self._subs = [self.session.declare_subscriber(self.keys.topic(topic), self._on_sample) for topic in DECODERS]
+        self._subs.append(self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/health/*", self._on_health))
         self._thread.start()
 
     def stop(self) -> None:
@@ -96,8 +96,6 @@ class LiveView:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         topic = key.rsplit("/", 1)[-1]
-        if topic not in DECODERS or topic == "cloud":  # clouds are the map server's: the view shows its map
-            return
         try:
             message = DECODERS[topic](sample.payload.to_bytes())
         except BadMessage as exc:
