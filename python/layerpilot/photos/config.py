@@ -87,9 +87,10 @@ class PhotoConfig:
     pick: PickConfig = field(default_factory=lambda: PickConfig(
         history=4, min_baseline_ratio=0.1, max_baseline_ratio=0.5, target_baseline_ratio=0.3, max_depth=1000.0,
         min_sharpness=0.0))
+    # Nadir photos from tens of metres: a depth beyond 100 m is a mismatch (in the forest they reached 200 m).
     match: MatchConfig = field(default_factory=lambda: MatchConfig(
         scale=0.5, num_disparities=240, block_size=9, uniqueness_ratio=5, speckle_window=50, speckle_range=16,
-        max_disparity_step=0.0, min_depth=5.0, max_depth=200.0))
+        max_disparity_step=0.0, min_depth=5.0, max_depth=100.0))
     resolution: float = 0.5  # voxel size of the map, metres
 
     def __post_init__(self) -> None:
