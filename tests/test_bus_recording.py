@@ -3,9 +3,12 @@ a damaged or truncated file is read up to the damage with a warning; a foreign s
 
 from __future__ import annotations
 
+import json
 import logging
 import subprocess
 import sys
+import threading
+import time
 from collections import Counter
 
 import numpy as np
@@ -16,7 +19,7 @@ from mcap.writer import Writer
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
-from layerpilot.bus.recording import Recorder, RecordingReader
+from layerpilot.bus.recording import Recorder, RecordingReader, RecordingWriter
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import PointCloud, Pose
 from conftest import wait_for
@@ -145,3 +148,55 @@ def _schema_of(path, key: str) -> tuple[str, str, bytes]:
             if channel.topic == key:
                 return schema.name, schema.encoding, schema.data
     raise AssertionError(f"no {key} in {path}")
+
+
+def test_a_full_disk_fails_the_recording_once_and_counts_what_it_drops(caplog):
+    """/dev/full: the writer thread reports ENOSPC once, drops what is queued and everything after it,
+    and closing says so in ``error`` instead of raising (``up``'s shutdown and its "stopped" line go on)."""
+    sent = bus_messages(150)  # ~1 MB of clouds: several 256 kB chunks, the first flush fails
+    writer = RecordingWriter("/dev/full", 'vehicles = ["uav1"]\n')
+    with caplog.at_level(logging.ERROR, logger="layerpilot.recording"):
+        for key, payload in sent:
+            writer.write(key, payload)
+        wait_for(lambda: writer.error, "the writer noticing the full disk")
+        for key, payload in sent[:20]:  # after the failure: counted, not queued
+            writer.write(key, payload)
+        writer.close()
+    assert "/dev/full: OSError: [Errno 28] No space left on device" in writer.error
+    assert not writer._thread.is_alive()
+    assert sum(writer.written.values()) + writer.dropped == len(sent) + 20 and writer.dropped >= 20
+    assert [r.levelno for r in caplog.records] == [logging.ERROR]  # once, not per message
+
+
+def test_record_command_to_a_full_disk_or_a_bad_path_says_so_and_fails(tmp_path, capsys):
+    """`layerpilot record`: a path it cannot create names the argument; a disk that fills up mid-way
+    ends with the stopped summary and one error line, exit 1."""
+    from layerpilot.cli import main
+
+    mission = tmp_path / "mission.toml"
+    mission.write_text('vehicles = ["uav1"]\n[bus]\nsecurity = false\n')
+    ep = free_endpoint()
+    assert main(["record", "/dev/full/bus.mcap", "--config", str(mission), "--endpoint", ep]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("layerpilot: error: out: cannot write the recording '/dev/full/bus.mcap'") and "\n" not in err
+    with open_session(BusConfig(endpoint=ep)) as nodes:
+        sent = bus_messages(150)
+        publisher = nodes.declare_publisher(K.cloud)
+
+        done = threading.Event()
+
+        def publish() -> None:  # however much arrives, the header alone cannot be flushed to /dev/full
+            while not publisher.matching_status.matching and not done.is_set():
+                time.sleep(0.01)
+            for key, payload in sent:
+                nodes.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+
+        thread = threading.Thread(target=publish, daemon=True)
+        thread.start()
+        code = main(["record", "/dev/full", "--config", str(mission), "--endpoint", ep, "--duration", "1"])
+        done.set()
+        thread.join()
+    out, err = capsys.readouterr()
+    stopped = json.loads(out.strip().splitlines()[-1])
+    assert code == 1 and stopped["status"] == "stopped" and "No space left on device" in stopped["error"]
+    assert err.strip().splitlines()[-1].startswith("layerpilot record: error: the recording is incomplete: /dev/full")

@@ -7,7 +7,9 @@ travelled. The mission file is kept as MCAP metadata (``layerpilot`` / ``mission
 replay flies the same map settings and behavior area.
 
 Writing happens on one thread behind a queue (a Zenoh callback never waits on compression);
-chunks carry CRCs. Reading is sequential and stops at the first damage (a truncated file
+chunks carry CRCs. When the file cannot be written (a full disk, a lost mount) the writer logs it
+once, drops and counts what is queued and every later message, and ``error`` says what happened:
+closing never raises, the mission goes on. Reading is sequential and stops at the first damage (a truncated file
 after a crash, a flipped bit in a chunk) with one warning saying where; messages whose schema
 is not one of ours are skipped and counted.
 """
@@ -72,7 +74,8 @@ class RecordingWriter:
         self._sequence: Counter[str] = Counter()
         self.written: Counter[str] = Counter()  # messages per key
         self.rejects = Rejects(_log)
-        self.dropped = 0  # the writer fell behind by more than MAX_QUEUED_BYTES
+        self.dropped = 0  # the writer fell behind by more than MAX_QUEUED_BYTES, or had failed
+        self.error = ""  # why the file could not be written ("" while it can)
         self._queue: deque[tuple[str, bytes, int]] = deque()
         self._queued_bytes = 0
         self._cond = threading.Condition()
@@ -90,7 +93,7 @@ class RecordingWriter:
         with self._cond:
             if self._closed:
                 return
-            if self._queued_bytes + len(payload) > MAX_QUEUED_BYTES:
+            if self.error or self._queued_bytes + len(payload) > MAX_QUEUED_BYTES:
                 self.dropped += 1
                 return
             self._queue.append((key, payload, time.time_ns() if log_time is None else log_time))
@@ -105,7 +108,21 @@ class RecordingWriter:
                     return
                 key, payload, stamp = self._queue.popleft()
                 self._queued_bytes -= len(payload)
-            self._add(key, payload, stamp)
+            try:
+                self._add(key, payload, stamp)
+            except Exception as exc:  # OSError mostly (ENOSPC); any failure leaves the MCAP writer unusable
+                self._fail(exc, after=f"{sum(self.written.values())} messages", lost=1)
+                return
+
+    def _fail(self, exc: Exception, after: str, lost: int = 0) -> None:
+        """Remember the first failure, log it once, drop (and count) what waits: no later write can succeed."""
+        with self._cond:
+            if not self.error:
+                self.error = f"{self.path}: {type(exc).__name__}: {exc} (after {after})"
+                _log.error("recording failed: %s; dropping every later message", self.error)
+            self.dropped += lost + len(self._queue)  # lost: the message being written when it failed
+            self._queue.clear()
+            self._queued_bytes = 0
 
     def _add(self, key: str, payload: bytes, stamp: int) -> None:
         topic = topic_of(key)
@@ -120,15 +137,23 @@ class RecordingWriter:
         self.written[key] += 1
 
     def close(self) -> None:
-        """Write what is queued, then the index and footer (the file is complete only after this)."""
+        """Write what is queued, then the index and footer (the file is complete only after this);
+        a failure is not raised but kept in ``error``."""
         with self._cond:
             if self._closed:
                 return
             self._closed = True
             self._cond.notify()
         self._thread.join()
-        self._mcap.finish()
-        self._file.close()
+        try:
+            if not self.error:
+                self._mcap.finish()
+        except Exception as exc:
+            self._fail(exc, after="the last message, writing the index and footer")
+        try:
+            self._file.close()
+        except OSError as exc:  # the buffered tail could not be flushed
+            self._fail(exc, after="writing the end of the file")
 
     def __enter__(self) -> "RecordingWriter":
         return self
@@ -148,11 +173,12 @@ class Recorder:
         self.writer.write(str(sample.key_expr), sample.payload.to_bytes())
 
     def stop(self) -> dict:
-        """Stop listening, finish the file; returns what was written (messages per key, rejects, drops)."""
+        """Stop listening, finish the file; returns what was written (messages per key, rejects, drops,
+        and ``error``: why the file is incomplete, "" when it is whole)."""
         self._sub.undeclare()
         self.writer.close()
         return {"path": str(self.writer.path), "messages": dict(self.writer.written),
-                "rejected": self.writer.rejects.total, "dropped": self.writer.dropped}
+                "rejected": self.writer.rejects.total, "dropped": self.writer.dropped, "error": self.writer.error}
 
 
 @dataclass(frozen=True)

@@ -100,7 +100,11 @@ def _record(args: argparse.Namespace) -> int:
     from layerpilot.mission.config import resolve
 
     mission, session = _session(args)
-    recorder = Recorder(session, args.out, resolve(args.config).read_text())
+    try:
+        recorder = Recorder(session, args.out, resolve(args.config).read_text())
+    except OSError as exc:
+        session.close()
+        raise OSError(f"out: cannot write the recording {args.out!r}: {exc.strerror or exc}") from None
     print(json.dumps({"node": "record", "status": "ready", "out": args.out}), flush=True)
     try:
         _wait(args.duration)
@@ -108,6 +112,10 @@ def _record(args: argparse.Namespace) -> int:
         summary = recorder.stop()
         session.close()
     print(json.dumps({"node": "record", "status": "stopped", **summary}), flush=True)
+    if summary["error"]:
+        print(f"layerpilot record: error: the recording is incomplete: {summary['error']}; "
+              f"{summary['dropped']} messages dropped", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -215,7 +215,11 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     if record is not None:  # listening before any node starts: the recording misses no cloud
         from layerpilot.bus.recording import Recorder
 
-        recorder = Recorder(session, record, path.read_text())
+        try:
+            recorder = Recorder(session, record, path.read_text())
+        except OSError as exc:
+            session.close()
+            raise OSError(f"--record: cannot write the recording {str(record)!r}: {exc.strerror or exc}") from None
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/; mission {mission_id}"
@@ -239,8 +243,13 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
                 break
     finally:
         sup.stop()
-        if recorder is not None:
-            print("layerpilot up: recorded " + json.dumps(recorder.stop()), flush=True)
+        recorded = recorder.stop() if recorder is not None else {}
+        if recorded:
+            print("layerpilot up: recorded " + json.dumps(recorded), flush=True)
         session.close()
     print("layerpilot up: stopped " + ", ".join(f"{n.name} ({n.proc.returncode})" for n in sup.nodes), flush=True)
+    if recorded.get("error"):
+        print(f"layerpilot up: error: the recording is incomplete: {recorded['error']}; "
+              f"{recorded['dropped']} messages dropped", file=sys.stderr, flush=True)
+        return 1
     return 0
