@@ -151,3 +151,19 @@ def test_a_short_lock_step_mission_over_a_1km_world(tmp_path, survey_behavior):
     sets = [wire.decode_layer_set(i.layer_set) for i in result.pilot_inputs]
     assert sets and all(s.geometry.shape == (1040, 1040) and s.window.shape == (263, 263) for s in sets)
     assert all(len(i.layer_set) < wire.MAX_BYTES for i in result.pilot_inputs)
+
+
+def test_a_drone_beyond_the_grid_heads_for_the_area_from_either_set():
+    """Its neighbourhood misses the grid (an empty window): the pilot's "approach" fallback needs only the area."""
+    g = GridGeometry(-128.0, -128.0, 1.0, 256, 256)
+    cl = ColumnLayers.empty(g)
+    cl.observed[10:20, 10:20], cl.elevation[10:20, 10:20], cl.last_seen[10:20, 10:20] = True, 3.0, 5.0
+    cl.min_distance[10:20, 10:20] = 9.0
+    far = GridWindow.around(g, 5000.0, 5000.0, 130.0)
+    assert far.empty
+    commands = []
+    for window in (None, far):
+        columns = wire.to_column_layers(wire.decode_layer_set(wire.encode_columns(cl, 1.0, "uav1", None, window)))
+        commands.append(build_pilot(Mission()).step((5000.0, 5000.0, 50.0), 1.0, columns))
+    assert commands[0].position == commands[1].position == (70.5, 70.5, 50.0)
+    assert commands[0].decision.fallback == commands[1].decision.fallback == "approach"

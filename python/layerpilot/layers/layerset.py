@@ -66,6 +66,8 @@ def check_layer(name: str, arr: object, shape: tuple[int, int]) -> np.ndarray:
     if not isinstance(arr, np.ndarray) or arr.shape != shape or arr.dtype != np.float32:
         got = f"{arr.shape} {arr.dtype}" if isinstance(arr, np.ndarray) else type(arr).__name__
         raise ValueError(f"layer {name!r}: expected float32 array of shape {shape}, got {got}")
+    if arr.size == 0:  # an empty window: the drone is beyond the grid (the maker then heads for the area)
+        return arr
     lo, hi = float(arr.min()), float(arr.max())
     if not (lo >= 0.0 and hi <= 1.0):  # also catches NaN
         raise ValueError(f"layer {name!r}: values must lie in [0, 1], got [{lo}, {hi}]")
