@@ -34,6 +34,15 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="the mission run this node belongs to (`up` gives one per run): a state saved in the "
                         "same run, by this node before a crash, is continued; another run's is not")
 
+    p = add_node_command(commands, "camera", _camera,
+                         "a real camera's frames on the bus: device, stream or video file, posed from the link's poses",
+                         flags={"source": "camera.source", "calibration": "camera.calibration",
+                                "file_start": "camera.file_start"})
+    p.add_argument("--source", help="device index (0), stream URL (rtsp://...) or video file (default: camera.source)")
+    p.add_argument("--calibration", help="OpenCV YAML calibration file (default: camera.calibration)")
+    p.add_argument("--file-start", type=float, help="mission time (s) of a video file's first frame "
+                                                    "(default: camera.file_start)")
+
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
     p.add_argument("--endpoint", help="listen endpoint (default tcp/127.0.0.1:7447)")
@@ -232,6 +241,15 @@ def _decide(args, mission, vehicle, session) -> Running:
                             "distance": round(node.distance_flown, 1), "rejected": node.rejects.total,
                             "aggregates_asked": node.aggregates_answered},
                    node.stop, {"behavior": mission.decide.behavior}, supervisor=node.supervisor)
+
+
+def _camera(args, mission, vehicle, session) -> Running:
+    from layerpilot.nodes.camera import CameraNode
+
+    node = CameraNode(session, vehicle, mission.camera)
+    node.start()
+    return Running(node.status, node.stop, {"source": mission.camera.source, "kind": node.kind},
+                   run=node.run, supervisor=node.supervisor)
 
 
 def _router(args: argparse.Namespace) -> int:

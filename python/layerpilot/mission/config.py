@@ -18,6 +18,7 @@ from layerpilot.bus.keys import check_vehicle
 from layerpilot.bus.session import BusConfig
 from layerpilot.config import ConfigError, RangeError, check_range, from_dict, load_toml, shipped_config
 from layerpilot.link.config import LinkConfig
+from layerpilot.mission.camera_track import CameraSettings
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.mission.pilot import PilotConfig
@@ -83,6 +84,7 @@ class Mission:
     decide: PilotConfig = field(default_factory=PilotConfig)
     link: LinkSettings = field(default_factory=LinkSettings)
     sim: SimConfig = field(default_factory=SimConfig)
+    camera: CameraSettings = field(default_factory=CameraSettings)
     evaluation: EvaluationSettings = field(default_factory=EvaluationSettings)
 
     def __post_init__(self) -> None:

@@ -1,0 +1,189 @@
+"""The camera node: a real camera's frames on the bus, each with its pose, as the simulator node publishes them.
+
+It reads a device (``camera.source = "0"``), a stream (``rtsp://...``, ``http://...``) or a
+video file with OpenCV's ``VideoCapture``. A frame is stamped on the mission clock: a file's
+frame ``i`` at ``file_start + i / fps``; a live frame at its arrival, moved onto the mission
+clock by the offset learnt from the link node's pose stream (mission.camera_track.ClockOffset),
+less ``latency``. It waits for a pose at or after its time while the pose stream keeps coming
+(one at least every ``max_gap`` seconds), gets the interpolated camera pose
+(mission.camera_track.PoseTrack) or is dropped with the reason counted, is undistorted with the
+calibration and goes out on ``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
+0, saying so); a device or stream that stops giving frames is reopened with a doubling wait up to
+``reconnect_max``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import zenoh
+
+from layerpilot.bus import keys
+from layerpilot.bus.guard import guarded
+from layerpilot.bus.messages import FrameMessage, State, decode_state, encode_frame
+from layerpilot.bus.reject import Rejects
+from layerpilot.bus.session import publish
+from layerpilot.geometry import CameraFrame
+from layerpilot.mission.camera_track import CameraSettings, ClockOffset, PoseTrack
+from layerpilot.nodes.runner import WAKE_PERIOD
+from layerpilot.nodes.supervise import Supervisor
+from layerpilot.photos.calibration import Calibration, read_calibration
+
+_log = logging.getLogger("layerpilot.camera")
+
+
+def source_kind(source: str) -> str:
+    """``device`` (an index), ``stream`` (a URL) or ``file``."""
+    if source.isdigit():
+        return "device"
+    return "stream" if "://" in source else "file"
+
+
+class CameraNode:
+    """``stop`` ends the capture loop; ``ended`` is set when the loop is over (a file's end, or a stop)."""
+
+    def __init__(self, session: zenoh.Session, vehicle: str, settings: CameraSettings,
+                 supervisor: Supervisor | None = None) -> None:
+        if settings.source == "sim":
+            raise ValueError("camera.source is 'sim': give a device index, a stream URL or a video file "
+                             "(--source), or let the simulator node render the frames")
+        if not settings.calibration:
+            raise ValueError("camera.calibration: give the camera's OpenCV calibration file (--calibration)")
+        self.session, self.keys, self.settings = session, keys.Keys(vehicle), settings
+        self.calibration: Calibration = read_calibration(settings.calibration)
+        self.kind = source_kind(settings.source)
+        if self.kind == "file" and not Path(settings.source).is_file():
+            raise ValueError(f"camera.source: video file {settings.source} not found")
+        self.supervisor = supervisor or Supervisor(_log)
+        self.rejects = Rejects(_log)
+        self.track = PoseTrack(settings)
+        self.offset = ClockOffset()
+        self.stop_event = threading.Event()
+        self.ended = threading.Event()
+        self.read = self.published = self.reconnects = 0
+        self._cond = threading.Condition()
+        self._pose_heard = 0.0  # local monotonic time of the newest pose
+        self._cap: cv2.VideoCapture | None = None
+        self._fps = 0.0
+        self._backoff = 0.5
+        self._outage = False
+        self._sub = None
+        self._open()
+
+    # --- poses ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._sub = self.session.declare_subscriber(self.keys.pose, guarded(decode_state, self._on_pose,
+                                                                            self.rejects, self.supervisor))
+
+    def _on_pose(self, s: State, key: str) -> None:
+        now = time.monotonic()
+        with self._cond:
+            self.track.add(s.stamp, s.pose)
+            self.offset.heard(s.stamp, now)
+            self._pose_heard = now
+            self._cond.notify_all()
+
+    # --- the capture loop -----------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        """Capture until ``stop`` or the file's end (the loop runs supervised; this thread waits)."""
+        self.supervisor.start("camera", self._iteration)
+        while not (stop.wait(WAKE_PERIOD) or self.ended.is_set() or self.supervisor.failed.is_set()):
+            pass
+        self.stop_event.set()
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        if self._sub is not None:
+            self._sub.undeclare()
+        self.supervisor.join(timeout=self.settings.reconnect_max + 2.0)
+        if self._cap is not None:
+            self._cap.release()
+
+    def _open(self) -> bool:
+        src = self.settings.source
+        cap = cv2.VideoCapture(int(src) if self.kind == "device" else src)
+        if not cap.isOpened():
+            cap.release()
+            if self.kind == "file":
+                raise ValueError(f"camera.source: cannot read video file {src} (not a video OpenCV can decode)")
+            return False
+        self._cap, self._fps = cap, cap.get(cv2.CAP_PROP_FPS)
+        if self.kind == "file" and not self._fps > 0:
+            raise ValueError(f"camera.source: video file {src} has no frame rate")
+        return True
+
+    def _iteration(self) -> bool:
+        if self.stop_event.is_set():
+            self.ended.set()
+            return False
+        ok, image = self._cap.read() if self._cap is not None else (False, None)
+        arrived = time.monotonic()
+        if not ok:
+            return self._no_frame()
+        if self._outage:
+            _log.warning("camera %s: frames again", self.settings.source)
+            self._outage, self._backoff = False, 0.5
+        index, self.read = self.read, self.read + 1
+        if self.kind == "file":
+            stamp = self.settings.file_start + index / self._fps
+        elif (mission_time := self.offset(arrived)) is None:
+            self.track.dropped["no pose yet"] += 1
+            return True
+        else:
+            stamp = mission_time - self.settings.latency
+        if (pose := self._camera_pose(stamp)) is None:
+            return True
+        h, w = image.shape[:2]
+        calibration = self.calibration.for_size(w, h)
+        rgb = cv2.cvtColor(calibration.undistort(image), cv2.COLOR_BGR2RGB)
+        self.published += 1
+        publish(self.session, self.keys.camera, encode_frame(FrameMessage(
+            self.keys.vehicle, self.published, CameraFrame(rgb, pose, calibration.intrinsics, stamp))))
+        return True
+
+    def _camera_pose(self, stamp: float):
+        """Wait for a pose at or after ``stamp`` while poses keep coming, then interpolate (None: dropped)."""
+        with self._cond:
+            while (self.track.newest < stamp and not self.stop_event.is_set()
+                   and time.monotonic() - self._pose_heard <= self.settings.max_gap):
+                self._cond.wait(0.05)
+            return self.track.camera_at(stamp)
+
+    def _no_frame(self) -> bool:
+        """A file's end stops the loop; a device or stream is reopened after a doubling wait."""
+        src = self.settings.source
+        if self.kind == "file":
+            _log.info("camera: video file %s ended after %d frames (%d published, %d dropped)",
+                      src, self.read, self.published, self.dropped)
+            self.ended.set()
+            return False
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+        if not self._outage:
+            _log.warning("camera %s %s: no frame (unplugged, busy or the stream dropped); reopening with "
+                         "waits up to %g s", self.kind, src, self.settings.reconnect_max)
+            self._outage = True
+        if self.stop_event.wait(self._backoff):
+            return True
+        self._backoff = min(2.0 * self._backoff, self.settings.reconnect_max)
+        self.reconnects += 1
+        self._open()
+        return True
+
+    # --- status ---------------------------------------------------------------------------
+
+    @property
+    def dropped(self) -> int:
+        return sum(self.track.dropped.values())
+
+    def status(self) -> dict:
+        return {"read": self.read, "published": self.published, "dropped": dict(self.track.dropped),
+                "poses": len(self.track), "reconnects": self.reconnects, "rejected": self.rejects.total,
+                "source": "live" if self.kind != "file" else "file"}
