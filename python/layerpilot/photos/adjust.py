@@ -205,7 +205,6 @@ class BundleAdjuster:
         # a track is valid when it has >= 2 photos and each photo once
         order = np.lexsort((cam, roots))
         roots, cam, nodes = roots[order], cam[order], nodes[order]
-        dup = np.zeros(len(roots), bool)
         same = (roots[1:] == roots[:-1]) & (cam[1:] == cam[:-1])
         bad_roots = set(roots[1:][same].tolist())
         _, first, counts = np.unique(roots, return_index=True, return_counts=True)
