@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from conftest import wait_for
 from test_link_flight import url_of
@@ -212,6 +213,11 @@ def test_up_resume_starts_the_sim_and_link_nodes_on_the_saved_mission_clock(tmp_
     (tmp_path / "state" / "uav2.json").write_text('{"time": "soon"}')
     with pytest.raises(ValueError, match="uav2.json: damaged mission state: ValueError"):
         survey.clock_after(tmp_path / "state", ["uav1", "uav2"])
+    for bad in ("NaN", "-3.0"):  # the clock's own check, naming the file
+        (tmp_path / "state" / "uav2.json").write_text(f'{{"time": {bad}}}')
+        with pytest.raises(ValueError, match=r"uav2\.json: damaged mission state: ValueError: mission clock start: "
+                                             r"expected finite seconds >= 0, got (nan|-3\.0)"):
+            survey.clock_after(tmp_path / "state", ["uav1", "uav2"])
 
 
 def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_reports_it_as_such():
@@ -224,6 +230,7 @@ def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_report
     stamps: list[tuple[float, float]] = []  # (pose stamp, the vehicle's uptime when it arrived)
     try:
         with flying_link_node(vehicle, MissionClock(500.0), end_action="loiter") as (node, session):
+            flying = vehicle.uptime  # the node flies: every pose from now on is later on the autopilot's clock
             sub = session.declare_subscriber(Keys("uav1").pose, lambda s: stamps.append(
                 (decode_state(s.payload.to_bytes()).stamp, vehicle.uptime)))
             wait_for(lambda: node.phase.startswith("returning home"), "the autopilot's failsafe", timeout=20)
@@ -234,18 +241,22 @@ def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_report
             # the autopilot's own failsafe, not a pilot: the text came just before the mode change
             found = re.fullmatch(r"returning home: autopilot failsafe: battery \(Battery 1 is low 15\.00V used "
                                  r"100 mAh, (\d+)% left\): RTL", node.phase)
-            assert found and 46 <= int(found[1]) <= 50, node.phase  # 2 %/s: the charge at the mode's heartbeat
+            # the charge at the mode's heartbeat: below the failsafe's 50 %, above what it has now (it drains on)
+            assert found and int(found[1]) <= 50, node.phase
             assert link.upsets[-1] == ("failsafe", link.failsafe) and link.failsafe in link.events
             assert not any("took over" in e for e in link.events) and node.end == ""
         assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the autopilot's return alone
         assert len(stamps) > 5 and all(500.0 < stamp <= 500.0 + uptime for stamp, uptime in stamps)
-        assert all(500.0 + uptime - stamp < 2.0 for stamp, uptime in stamps[-3:])  # pose rate, mission s at 10x
+        assert all(b[0] >= a[0] for a, b in zip(stamps, stamps[1:]))  # the autopilot's clock only goes on
+        assert stamps[-1][0] > 500.0 + flying  # ... up to the failsafe: the stamps follow the flight
         statuses = []  # every BATTERY_STATUS the ground station got; the newest counts
         while (m := gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=0.5)) is not None:
             statuses.append(m)
         status = statuses[-1]
         assert statuses[0].current_battery == 0 and status.current_battery == 1500  # disarmed, then 15 A armed
-        assert 100 <= status.current_consumed <= 130                 # mAh, still drawing while it returns
+        assert int(found[1]) >= status.battery_remaining
+        assert 100 <= status.current_consumed < 200  # mAh: past BATT_LOW_MAH, still drawing while it returns
+        assert status.battery_remaining == pytest.approx(100 * (1 - status.current_consumed / 200), abs=1)
         assert status.voltages[0] == pytest.approx(1000 * (13.2 + 3.6 * status.battery_remaining / 100), abs=40)
     finally:
         gcs.close()
@@ -263,6 +274,45 @@ def test_link_node_commands_rtl_when_the_pilot_turns_home_for_the_battery():
                                   "mode RTL)") and vehicle.mode == "RTL"
         assert vehicle.mode == "RTL"  # the mission's end (end_action loiter) leaves the return alone
     finally:
+        vehicle.stop()
+
+
+def test_an_unacknowledged_battery_rtl_is_tried_again_and_the_mission_end_still_follows():
+    """The autopilot refuses RTL (ArduPilot: FAILED): no return, so the node keeps flying, tries again at each
+    wake, and its end still commands the end action: the vehicle is never left in GUIDED unsupervised."""
+    vehicle = start_vehicle(BatteryConfig())
+    answer, refused = vehicle._command, []
+    vehicle._command = lambda msg: (refused.append(msg.command), mav.MAV_RESULT_FAILED)[1] \
+        if msg.command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH else answer(msg)
+    try:
+        with flying_link_node(vehicle, end_action="loiter") as (node, session):
+            publish(session, Keys("uav1").state, encode_mission_state(MissionState(
+                10.0, "uav1", RETURN_PHASE, 7, 6, 300.0, np.array([0.0, 0.0, 50.0]))))
+            wait_for(lambda: len(refused) >= 3, "the RTL to be tried again", timeout=20)
+            assert node.phase == "flying" and vehicle.mode == "GUIDED" and node.rtl_refusals >= 2
+            assert node.end.startswith("RTL rejected")
+        assert vehicle.mode == "LOITER" and node.end.startswith("LOITER acknowledged"), node.end
+    finally:
+        vehicle.stop()
+
+
+def test_guided_handed_back_after_the_autopilots_battery_return_is_flown_and_ended_again():
+    """After the autopilot's own RTL a pilot hands GUIDED back: the node flies it again, and its end commands
+    the end action (without, the vehicle would hover in GUIDED with nothing supervising it)."""
+    vehicle = start_vehicle(BatteryConfig(capacity_mah=200.0, low_mah=100.0, idle_current_a=0.0))
+    gcs = None
+    try:
+        with flying_link_node(vehicle, end_action="loiter") as (node, session):
+            wait_for(lambda: node.phase.startswith("returning home: autopilot failsafe"), "the failsafe", timeout=20)
+            gcs = open_connection(url_of(vehicle), 255, 190)  # the pilot's ground station
+            gcs.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                      4, 0, 0, 0, 0, 0)  # GUIDED
+            wait_for(lambda: node.phase == "flying", "the node to fly again", timeout=10)
+            assert vehicle.mode == "GUIDED" and vehicle.armed
+        assert vehicle.mode == "LOITER" and node.end.startswith("LOITER acknowledged"), node.end
+    finally:
+        if gcs is not None:
+            gcs.close()
         vehicle.stop()
 
 

@@ -175,6 +175,7 @@ class FlightLink:
         self._abandoned = ""        # why the current waypoint was dropped (long loss, land/RTL requested)
         self.upsets: list[tuple[str, str]] = []  # (kind, what happened): takeovers, disarms, reboots
         self.reboots = 0
+        self.uptimes_before_reboot: list[float] = []  # the autopilot's uptime (s) when each reboot cut it
         self._uptime = -math.inf    # the autopilot's newest time_boot_ms (s): a step back is a reboot
         self._disarmed_at: float | None = None  # an unexplained disarm, reported after REBOOT_GRACE_S
         self._rebooted = False      # the worker re-requests the streams a reboot forgot
@@ -796,6 +797,7 @@ class FlightLink:
     def _on_reboot(self, uptime: float) -> str:
         """(``_cond`` held) The autopilot restarted: let go, forget what it must tell again (home, position)."""
         self.reboots += 1
+        self.uptimes_before_reboot.append(self._uptime)
         self._disarmed_at = None
         text = (f"autopilot rebooted: its uptime went back from {self._uptime:.1f} s to {uptime:.1f} s; "
                 f"{'ARMED' if self._armed else 'disarmed'} in {self._mode}"

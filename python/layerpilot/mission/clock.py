@@ -7,7 +7,8 @@ clock at 0 again, so a resumed flight (``up --resume``) stamps ``start + vehicle
 ``start`` the newest mission time its survey saved: cells seen in an earlier flight are as old
 as they are, and ``after_time`` schedule phases count on. The stamps are made on this clock
 where they are made (the link node's poses, the simulator node's frames); every consumer reads
-them as they come.
+them as they come. An autopilot that reboots in flight (``link.on_reboot = "pause"``) also counts
+from 0 again: the link node moves its clock on by the uptime before the reboot.
 """
 
 from __future__ import annotations
@@ -28,3 +29,8 @@ class MissionClock:
 
     def __call__(self, vehicle_time: float) -> float:
         return self.start + vehicle_time
+
+    def after_reboot(self, uptime: float) -> "MissionClock":
+        """The clock once the vehicle's clock restarted at 0 after ``uptime`` s (a reboot in flight): on
+        from where it was, so that stamps never go back (the map keeps the newest as a cell's last_seen)."""
+        return MissionClock(self.start + uptime)

@@ -39,16 +39,16 @@ def state_file(directory: str | Path, vehicle: str) -> Path:
 def clock_after(directory: str | Path, vehicles: list[str] | tuple[str, ...]) -> MissionClock:
     """The clock of the flight that resumes the survey saved in ``directory``: on from the newest
     mission time any of ``vehicles`` saved (one clock for all, as the map server's cells share it)."""
-    times = []
+    clocks = [MissionClock()]
     for vehicle in vehicles:
         path = state_file(directory, vehicle)
-        try:
-            times.append(float(json.loads(path.read_text())["time"]))
+        try:  # the clock too: a NaN or negative time is this file's damage
+            clocks.append(MissionClock(float(json.loads(path.read_text())["time"])))
         except FileNotFoundError:
             continue
         except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: damaged mission state: {type(exc).__name__}: {exc}") from None
-    return MissionClock(max(times, default=0.0))
+    return max(clocks, key=lambda clock: clock.start)
 
 
 def saved_mission_id(path: str | Path) -> str:

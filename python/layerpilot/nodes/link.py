@@ -15,7 +15,9 @@ autopilot's own battery failsafe took the vehicle home (``link.failsafe``: not a
 node ends the mission the same way, leaving the autopilot's RTL alone. Pose stamps are the
 autopilot's clock (time_boot_ms) on the mission clock (mission.clock: + the saved mission time
 when a survey resumes): the simulator node stamps its camera frames, and so the clouds and layer
-sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp.
+sets, with the same clock, at any speed; in camera-only mode the frames take the pose's stamp. A
+reboot in flight moves the node's mission clock on by the uptime the autopilot had (its clock counts
+from 0 again), so the stamps never go back.
 """
 
 from __future__ import annotations
@@ -77,6 +79,8 @@ class LinkNode:
         self.poses = 0
         self._held: tuple[Waypoint, str] | None = None  # the newest waypoint heard while paused after a reboot
         self._interrupter: threading.Thread | None = None
+        self._clock_reboots = 0  # reboots the mission clock was moved on for
+        self.rtl_refusals = 0  # battery RTLs not acknowledged (each tried again at the next wake)
 
     def clock(self) -> float:
         return time.monotonic() - self._t0
@@ -121,12 +125,14 @@ class LinkNode:
         reboots = self.link.reboots
         while not stop.wait(WAKE_PERIOD):
             if self.homeward.is_set() and self.phase == "flying":
-                _, self.end = self.link.end_mission("rtl", self.cfg.end_timeout)
-                self.phase = f"returning home for the battery: {self.end}"
-                _log.warning("%s", self.phase)
-            if self.link.failsafe and self.phase == "flying":  # the autopilot's own return: as the pilot's
+                self._return_home()
+            if self.link.failsafe and self.phase == "flying" and self.link.paused:  # the autopilot's own return
                 self.phase = f"returning home: {self.link.failsafe}"
                 _log.warning("%s; the mission's end leaves it so", self.phase)
+            elif self.phase.startswith("returning home: ") and not self.link.paused and self._guided_again():
+                self.phase = "flying"  # a pilot handed GUIDED back after the failsafe: the link flies it again
+                _log.warning("GUIDED handed back after the autopilot's return: flying again; the mission's end "
+                             "commands %s", self.cfg.end_action)
             if self.link.reboots == reboots:
                 continue
             reboots = self.link.reboots
@@ -142,6 +148,24 @@ class LinkNode:
                 pass
             if self.link.reboots == reboots and not stop.is_set():
                 self._resume()
+
+    def _return_home(self) -> None:
+        """RTL for the battery; only an acknowledged RTL is a return (``stop`` then leaves it so): a refused
+        or unanswered one is tried again at the next wake, and the mission's end still commands its action."""
+        ok, self.end = self.link.end_mission("rtl", self.cfg.end_timeout)
+        if ok:
+            self.phase = f"returning home for the battery: {self.end}"
+            _log.warning("%s", self.phase)
+            return
+        self.rtl_refusals += 1
+        if self.rtl_refusals == 1:
+            _log.warning("battery return: %s; trying again (the mission's end still commands %s)", self.end,
+                         self.cfg.end_action)
+
+    def _guided_again(self) -> bool:
+        """The vehicle is back in GUIDED, armed (a pilot handed it back after an RTL): nothing else supervises it."""
+        t = self.link.telemetry()
+        return t.armed and t.mode == GUIDED_MODE.get(self.link.flavour)
 
     def _flying_again(self, guided: str) -> bool:
         t = self.link.telemetry()
@@ -182,9 +206,16 @@ class LinkNode:
         """One pose at ``pose_rate`` (a supervised loop: an error is counted, the next pose goes out)."""
         if self._stop.wait(1.0 / self.cfg.pose_rate):
             return False
+        cut = self.link.uptimes_before_reboot
+        if len(cut) > self._clock_reboots:  # the autopilot's clock restarted at 0: the mission's goes on
+            for uptime in cut[self._clock_reboots:]:
+                self.mission_clock = self.mission_clock.after_reboot(uptime)
+            self._clock_reboots = len(cut)
         if not self.link.position_valid:  # (0, 0, 0) before the autopilot's first position is no pose
             return True
         t = self.link.telemetry()
+        if len(cut) != self._clock_reboots or not self.link.position_valid:  # a reboot meanwhile: the next one
+            return True
         if t.link_ok:
             battery = t.battery_remaining / 100.0 if 0 <= t.battery_remaining <= 100 else math.nan
             publish(self.session, self.keys.pose, encode_state(State(
@@ -213,8 +244,10 @@ class LinkNode:
         self.supervisor.join()
         if self._interrupter is not None:
             self._interrupter.join(timeout=1.0)  # its interrupt() lands before the end action clears it
-        failed, homeward, self.phase = self.phase == "failed", self.phase.startswith("returning home"), "ending"
-        if not homeward:  # an RTL for the battery stays: the autopilot flies home and lands
+        # an RTL for the battery stays (the autopilot flies home and lands) unless a pilot handed GUIDED back
+        homeward = self.phase.startswith("returning home") and not self._guided_again()
+        failed, self.phase = self.phase == "failed", "ending"
+        if not homeward:
             _, self.end = self.link.end_mission(self.cfg.end_action, self.cfg.end_timeout)
         self.phase = "failed" if failed else "ended"
         self.link.close()

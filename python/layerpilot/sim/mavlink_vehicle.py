@@ -177,6 +177,7 @@ class MavlinkVehicle:
         self._next_send = {msg_id: 0.0 for msg_id in self._intervals}
         self.battery = Battery(self.config.battery)
         self.boots = 1
+        self._battery_failsafe = False  # ArduCopter acts on the low-battery failsafe once per boot
         self._boot_at = 0.0  # mission time of the last boot: time_boot_ms counts from here
         self._ground_time = 0.0
         self._airborne = False
@@ -226,6 +227,7 @@ class MavlinkVehicle:
             self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
             self._velocity_deadline, self._setpoint_times = None, []
             self._auto = None  # a mission flown after the boot starts again at item 1
+            self._battery_failsafe = False
             self._intervals = dict(DEFAULT_INTERVALS)
             self._next_send = {msg_id: self.time for msg_id in self._intervals}
 
@@ -544,7 +546,8 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_CRITICAL, "Failsafe: offboard signal lost, holding")
             self.mode = "LOITER"
             v.hold()
-        if self.battery.low and self._airborne and self.mode not in ("RTL", "LAND"):  # BATT_FS_LOW_ACT = RTL
+        if self.battery.low and self._airborne and not self._battery_failsafe and self.mode not in ("RTL", "LAND"):
+            self._battery_failsafe = True  # BATT_FS_LOW_ACT = RTL, once: a pilot may then take another mode
             self._text(mav.MAV_SEVERITY_CRITICAL, f"Battery 1 is low {self.battery.voltage:.2f}V used "
                                                   f"{self.battery.consumed_mah:.0f} mAh")
             self._enter_mode("RTL")
