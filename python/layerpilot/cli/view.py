@@ -13,7 +13,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("view", help="join a running mission on the bus and show it live in Rerun")
     _bus_options(p)
     p.add_argument("--vehicle", help="vehicle to follow (default: the mission's first)")
-    p.add_argument("--web", action="store_true", help="serve the web viewer on localhost instead of the native one")
+    p.add_argument("--web", action="store_true", help="serve the web viewer instead of the native one (the page on every "
+                   "interface, Rerun 0.41 cannot bind it; the data server on 127.0.0.1 only)")
     p.add_argument("--web-port", type=int, default=9090, help="the web viewer page's port (default 9090)")
     p.add_argument("--grpc-port", type=int, default=9876, help="Rerun's data server port (default 9876)")
     p.add_argument("--color-by", choices=["color", "height", "age"], default="color",
@@ -77,8 +78,12 @@ def _view(args: argparse.Namespace) -> int:
     vehicle = args.vehicle or mission.vehicles[0]
     if vehicle not in mission.vehicles:
         raise ValueError(f"--vehicle {vehicle!r}: the mission's vehicles are {mission.vehicles}")
-    stream = open_stream(f"live-{vehicle}", save=args.save, web_port=args.web_port if args.web else None,
-                         grpc_port=args.grpc_port, spawn=not args.web)
+    try:
+        stream = open_stream(f"live-{vehicle}", save=args.save, web_port=args.web_port if args.web else None,
+                             grpc_port=args.grpc_port, spawn=not args.web)
+    except (OSError, ValueError):  # a busy port, no display: one line from main, nothing left open
+        session.close()
+        raise
     view = LiveView(session, mission, MissionScene(stream.stream, args.color_by), vehicle,
                     metrics=lambda cl, aoi, now: area_metrics(cl, aoi, now).as_dict())
     view.start()

@@ -1,12 +1,18 @@
-"""Where a mission's Rerun recording goes: an .rrd file, the web viewer on localhost, the native viewer.
+"""Where a mission's Rerun recording goes: an .rrd file, the web viewer, the native viewer.
 
-The web viewer is two local servers: Rerun's gRPC server holding the recording (``grpc_port``) and
-the static viewer page (``web_port``), which connects to it; ``url`` is what a browser opens.
+The web viewer is two servers: Rerun's gRPC server holding the recording (``grpc_port``, bound to
+127.0.0.1 only) and the static viewer page (``web_port``), which connects to it; ``url`` is what a
+browser opens. Rerun 0.41's ``serve_web_viewer`` has no bind address: the page (HTML, JS and Wasm,
+no mission data) listens on every interface (0.0.0.0); the data stays on this machine. Both ports
+are checked before the stream is declared ready: a port another process holds is an error here,
+not a viewer silently showing that process's data.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import socket
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,9 +48,14 @@ def open_stream(name: str, *, save: str | Path | None = None, web_port: int | No
         Path(save).parent.mkdir(parents=True, exist_ok=True)
         sinks.append(rr.FileSink(str(save)))
     if web_port is not None:
+        require_free_port("127.0.0.1", grpc_port, "Rerun's data server (--grpc-port)")
+        require_free_port("0.0.0.0", web_port, "the web viewer page (--web-port)")
         server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=grpc_port)
         sinks.append(server)
-        rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=server.uri)
+        try:
+            rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=server.uri)
+        except RuntimeError as exc:  # taken between the check and here
+            raise OSError(f"the web viewer page (--web-port): cannot serve on port {web_port}: {exc}") from None
         url = f"http://127.0.0.1:{web_port}/?url={quote(server.uri, safe='')}"
     if spawn:  # the native viewer, listening on grpc_port
         if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
@@ -54,6 +65,20 @@ def open_stream(name: str, *, save: str | Path | None = None, web_port: int | No
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{grpc_port}/proxy"))
     stream.set_sinks(*sinks, default_blueprint=layout())
     return ViewStream(stream, url)
+
+
+def require_free_port(host: str, port: int, what: str) -> None:
+    """OSError naming ``what`` when ``host:port`` cannot be listened on (another server holds it).
+
+    Rerun's servers report a busy port only in a background thread (gRPC) or as a raw RuntimeError
+    (the page); a bind probe here gives the user one line to act on."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as Rerun's listeners: TIME_WAIT is free
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            why = "already in use by another process" if exc.errno == errno.EADDRINUSE else exc.strerror
+            raise OSError(f"{what}: port {port} on {host}: {why}; choose another port") from None
 
 
 def layout():
