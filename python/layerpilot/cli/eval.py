@@ -58,7 +58,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     demo.add_argument("--seed", type=int, help="decision seed (decide.seed)")
     demo.add_argument("--name", default=None, help="run directory name (default: demo-BEHAVIOR)")
     demo.add_argument("--view", nargs="?", const="native", choices=["native", "web"],
-                      help="show the mission in Rerun as it flies: the native viewer, or `web` (docs/view.md: bind addresses)")
+                      help="show the mission in Rerun as it flies: the native viewer, or `web` "
+                           "(docs/view.md: bind addresses)")
     demo.add_argument("--web-port", type=int, default=9090, help="--view web: the viewer page's port (default 9090)")
     demo.add_argument("--no-rrd", action="store_true", help="do not save the run's Rerun recording (mission.rrd)")
     _mission_options(demo)
