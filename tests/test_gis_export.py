@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from layerpilot.cli import main
+from layerpilot.eval.geotiff import MAP_LAYERS, exportable_layers
 from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.geodesy import LocalFrame
 from layerpilot.map import VoxelMap
@@ -91,3 +92,18 @@ def test_a_map_without_a_place_gets_a_clear_error(tmp_path, capsys):
     assert main(["layers", "export", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "frame.json" in err and "--origin LAT LON ALT" in err
+
+
+def test_export_names_only_layers_a_map_alone_gives(exported, tmp_path, capsys):
+    """view_gain is registered (it needs a camera view and an area of interest): refused up front, with the
+    list of what export can compute (the registry's layer_names for a map-only context)."""
+    run = tmp_path / "run"
+    run.mkdir()
+    exported[1].save(run / "map.ot")
+    write_run_frame(run, FRAME)
+    assert main(["layers", "export", str(run), "--layer", "view_gain", "--layer", "nope"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("layerpilot: error: layer: cannot export 'view_gain' (needs a decision context, not a map alone), "
+                   "'nope' (unknown); exportable: " + ", ".join(exportable_layers()))
+    assert "view_gain" not in exportable_layers() and set(MAP_LAYERS) <= set(exportable_layers())
+    assert not (run / "geotiff").exists()

@@ -26,7 +26,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     ex.add_argument("--origin", type=float, nargs=3, metavar=("LAT", "LON", "ALT"),
                     help="the map frame's geodetic origin (default: the run directory's frame.json)")
     ex.add_argument("--layer", action="append", dest="layers", metavar="NAME",
-                    help="decision layer to export (repeatable; default: fringe, time, distance, elevation)")
+                    help="decision layer to export (repeatable; default: fringe, time, distance, elevation; "
+                         "only layers a map alone gives, not view_gain)")
     ex.add_argument("--out", type=Path, help="output folder (default: <run directory>/geotiff)")
     ex.set_defaults(func=_export)
 

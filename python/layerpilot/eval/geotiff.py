@@ -23,7 +23,7 @@ import tifffile
 
 from layerpilot.geodesy import LocalFrame
 from layerpilot.grid import GridGeometry
-from layerpilot.layers import LayerContext, compute_layers
+from layerpilot.layers import LayerContext, compute_layers, layer_names
 from layerpilot.map import VoxelMap
 from layerpilot.progress import Progress
 
@@ -96,11 +96,23 @@ def map_grid(voxel_map: VoxelMap) -> GridGeometry:
                         max(1, int(np.ceil((y1 - oy) / r))))
 
 
+def exportable_layers() -> list[str]:
+    """The registered layers computable from a map alone (what ``export_layers`` accepts)."""
+    return layer_names(LayerContext(now=0.0))
+
+
 def export_layers(voxel_map: VoxelMap, frame: LocalFrame, out: Path, names: Sequence[str] = MAP_LAYERS) -> list[Path]:
     """color.tif, elevation_m.tif and one GeoTIFF per named layer of ``voxel_map`` into ``out``.
 
-    Time-dependent layers are taken at the map's newest observation.
+    Time-dependent layers are taken at the map's newest observation. Only layers a map alone gives
+    can be exported (``exportable_layers``); one needing a decision's context (view_gain: a camera
+    view and an area of interest) is a ValueError naming what can.
     """
+    exportable = exportable_layers()
+    if refused := [n for n in names if n not in exportable]:
+        why = ", ".join(f"{n!r} ({'needs a decision context, not a map alone' if n in layer_names() else 'unknown'})"
+                        for n in refused)
+        raise ValueError(f"layer: cannot export {why}; exportable: {', '.join(exportable)}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     columns = voxel_map.column_layers_for(map_grid(voxel_map))
