@@ -200,3 +200,21 @@ def test_record_command_to_a_full_disk_or_a_bad_path_says_so_and_fails(tmp_path,
     stopped = json.loads(out.strip().splitlines()[-1])
     assert code == 1 and stopped["status"] == "stopped" and "No space left on device" in stopped["error"]
     assert err.strip().splitlines()[-1].startswith("layerpilot record: error: the recording is incomplete: /dev/full")
+
+
+def test_replay_behavior_of_a_vehicle_the_recording_holds_nothing_of_fails(tmp_path, capsys):
+    """A two-vehicle mission whose recording holds only uav1: replaying uav2's behavior says so, exit 2,
+    instead of an empty picture."""
+    from layerpilot.cli import main
+
+    rec = tmp_path / "uav1-only.mcap"
+    with RecordingWriter(rec, 'vehicles = ["uav1", "uav2"]\n') as writer:
+        for key, payload in bus_messages(10):
+            writer.write(key, payload)
+    code = main(["replay", str(rec), "--behavior", "exploration", "--vehicle", "uav2", "--out", str(tmp_path / "o")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("layerpilot: error:")]
+    assert code == 2 and len(err) == 1
+    assert err[0].endswith("holds 0 poses and 0 clouds of vehicle 'uav2': nothing to replay --behavior on "
+                           "(--vehicle: one of ['uav1', 'uav2'])"), err
+    assert not (tmp_path / "o" / "replay.png").exists()
+    assert main(["replay", str(rec), "--behavior", "exploration", "--out", str(tmp_path / "o")]) == 0  # uav1's

@@ -164,6 +164,12 @@ def test_replay_map_only_gives_the_live_map_voxel_for_voxel(live):
     assert p.returncode == 0, stderr
     clouds = int(re.search(r"\((\d+) clouds\)", stdout).group(1))
     assert clouds == live["recorded"]["messages"]["layerpilot/uav1/cloud"] > 0
+    with open(live["dir"] / "mission.mcap", "rb") as f:  # the live map server's own counts, as it published them
+        health = [json.loads(decoded.status) for _, _, _, decoded in make_reader(f, decoder_factories=[
+            DecoderFactory()]).iter_decoded_messages(topics=["layerpilot/uav1/health/map-server"])]
+    assert health and health[-1]["inserted"] > 0
+    assert health[-1]["dropped"] == 0, (f"the live map server dropped {health[-1]['dropped']} clouds (queue full "
+                                        f"under load): its map cannot equal the replay's; {health[-1]}")
     live_map, replayed = VoxelMap.load(live["dir"] / "map.ot"), VoxelMap.load(out / "map.ot")
     box = np.array([-500.0, -500.0, -100.0]), np.array([500.0, 500.0, 300.0])
     a, b = live_map.voxels(*box, min_occupancy=0.0), replayed.voxels(*box, min_occupancy=0.0)

@@ -75,7 +75,7 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
         pilot = build_pilot(dataclasses.replace(mission, decide=dataclasses.replace(mission.decide, behavior=behavior)))
     period = 1.0 / mission.map_server.layers_rate
     next_tick = 0.0
-    rejected, clouds = 0, 0
+    rejected, clouds, own_clouds = 0, 0, 0
     decisions, flown, path = [], [], []
     progress = Progress(max(1, reader.size) / 1e6, f"replay {reader.path.name}", " MB", progress_stream)
     for i, m in enumerate(reader.messages()):
@@ -85,6 +85,7 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
                 if c.vehicle in mission.vehicles:  # as the map server: the mission's vehicles only
                     service.insert(c.cloud.points, c.cloud.origin, c.cloud.colors, c.cloud.stamp, c.max_range or None)
                     clouds += 1
+                    own_clouds += c.vehicle == vehicle
             elif m.topic == "decision" and m.key.split("/")[1] == vehicle:
                 flown.append(_decision_record(msg.decode_decision(m.data)))
             elif m.topic == "pose" and m.key.split("/")[1] == vehicle:
@@ -104,6 +105,9 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
     service.map.save(map_path)
     result = ReplayResult(out, map_path, clouds, rejected, reader.damage, dict(reader.unknown_schemas),
                           decisions, flown, np.array(path).reshape(-1, 3))
+    if pilot is not None and not (path and own_clouds):  # nothing to decide on, nothing to draw
+        raise ValueError(f"recording {reader.path}: holds {len(path)} poses and {own_clouds} clouds of vehicle "
+                         f"{vehicle!r}: nothing to replay --behavior on (--vehicle: one of {mission.vehicles})")
     if pilot is not None:
         with open(out / "decisions.jsonl", "w") as f:
             for record in decisions:
