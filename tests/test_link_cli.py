@@ -1,6 +1,6 @@
 """`layerpilot link` as a user runs it (a subprocess): errors a user can act on, in one line on stderr,
 no traceback; --timeout bounds every wait; no telemetry line unless an autopilot was heard; the link
-node says `ready` only once connected; `rtl` on a disarmed vehicle is an error."""
+node says `ready` only once connected; `rtl` and `land` on a disarmed vehicle are errors."""
 
 from __future__ import annotations
 
@@ -81,8 +81,9 @@ def test_rtl_and_land_on_a_disarmed_vehicle(vehicle):
     assert "rtl: done" not in done.stdout and "disarmed" in done.stdout  # the real telemetry line
     assert endpoint.mode != "RTL"
     done = link("--mavlink", url, "--timeout", "10", "land")
-    assert done.returncode == 0, done.stderr
-    assert "land: the vehicle is already on the ground (disarmed); nothing sent" in done.stdout
+    assert done.returncode == 1
+    assert "layerpilot link land: error: LAND: the vehicle is disarmed (on the ground" in one_line_error(done)
+    assert "land: done" not in done.stdout and "disarmed" in done.stdout
     assert endpoint.mode != "LAND"
 
 

@@ -84,11 +84,12 @@ def _node(args, mission, vehicle, session) -> Running:
 
 def link_settings(args: argparse.Namespace, mission, vehicle: str):
     """The mission's link settings; the autopilot's URL is --mavlink, else for a camera-only mission
-    the real autopilot's (``[link.link].url``), else this vehicle's simulator."""
+    or a real camera (``camera.source`` not ``sim``) the real autopilot's (``[link.link].url``), else
+    this vehicle's simulator."""
     import dataclasses
 
     settings = mission.link
-    if not args.mavlink and not mission.camera_only:
+    if not args.mavlink and not mission.camera_only and mission.camera.source == "sim":
         settings = dataclasses.replace(settings, link=dataclasses.replace(settings.link,
                                                                           url=mission.mavlink_url(vehicle)))
     return settings
@@ -152,12 +153,8 @@ def _fly(args: argparse.Namespace, action: str, config, bound: dict, geofence, p
                 link.start_guided()
                 link.goto(args.x, args.y, args.z, yaw=None if args.yaw is None else math.radians(args.yaw),
                           **bound)
-            elif action == "land" and not link.armed:
-                print(link.telemetry().line(), flush=True)
-                print("land: the vehicle is already on the ground (disarmed); nothing sent")
-                return 0
             elif action == "land":
-                link.land(**bound)
+                link.land(**bound)  # refused on a disarmed vehicle (as rtl): it is on the ground already
             else:
                 link.rtl(**bound)  # refused on a disarmed vehicle: on the ground, nothing to return from
         except (LinkError, ValueError) as exc:

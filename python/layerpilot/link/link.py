@@ -533,17 +533,23 @@ class FlightLink:
                        deadline - time.monotonic())
 
     def land(self, wait: bool = True, timeout: float = 180.0) -> None:
-        """Land where the vehicle is (NAV_LAND); with ``wait``, until it has disarmed."""
+        """Land where the vehicle is (NAV_LAND); with ``wait``, until it has disarmed.
+
+        A disarmed vehicle is on the ground: nothing to land, LinkError (nothing is sent)."""
+        self._require_armed("LAND")
         self._release(mav.MAV_CMD_NAV_LAND, "LAND", wait, timeout)
 
     def rtl(self, wait: bool = True, timeout: float = 300.0) -> None:
         """Return to launch and land (NAV_RETURN_TO_LAUNCH); with ``wait``, until it has disarmed.
 
         A disarmed vehicle is on the ground: nothing to return from, LinkError (nothing is sent)."""
+        self._require_armed("RTL")
+        self._release(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, "RTL", wait, timeout)
+
+    def _require_armed(self, what: str) -> None:
         self._require_link()
         if not self._armed:
-            raise LinkError(f"RTL: the vehicle is disarmed (on the ground, mode {self._mode}); nothing sent")
-        self._release(mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, "RTL", wait, timeout)
+            raise LinkError(f"{what}: the vehicle is disarmed (on the ground, mode {self._mode}); nothing sent")
 
     def command(self, command: int, *params: float) -> None:
         """Send COMMAND_LONG and wait for its ACK; CommandRejected unless MAV_RESULT_ACCEPTED."""
