@@ -59,3 +59,17 @@ def test_bench_map_memory_on_a_surveyed_world(capsys) -> None:
     assert m["bytes_per_leaf"] < m["octomap_bytes_per_leaf"] and m["ratio_memory"] > 1
     assert m["bytes_per_leaf"] < m["bytes_per_leaf_with_insert_scratch"]
     assert abs(m["total_mib"] - m["tree_mib"] - m["column_index_mib"]) <= 0.01
+
+
+def test_map_images_with_one_usable_photo_says_no_pair_could_be_made(tmp_path: Path, capsys) -> None:
+    """One real DJI photo: no pair, so no depth and no map: an error, exit 2, nothing written."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    images = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "brighton_beach" / "images"
+    first = sorted(images.glob("*.JPG"))[0]
+    (photos / first.name).write_bytes(first.read_bytes())
+    assert main(["map", "images", str(photos), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"layerpilot: error: {photos}: only 1 usable photo ({first.name}): no pair could be made; "
+                   "a map needs at least two overlapping photos")
+    assert not (tmp_path / "run").exists()

@@ -55,11 +55,17 @@ def _images(args: argparse.Namespace) -> None:
                          read_calibration(args.calibration) if args.calibration else None, args.width)
     for name, why in folder.skipped.items():
         print(f"skipped {name}: {why}")
+    if len(folder.photos) < 2:  # a map needs depth, and depth needs a pair
+        raise ValueError(f"{args.folder}: only {len(folder.photos)} usable photo ({folder.photos[0].path.name}): "
+                         f"no pair could be made; a map needs at least two overlapping photos")
     result = build_photo_map(folder, config, label="map images")
     for p in result.pairs:
         print(f"pair {folder.photos[p.ref].path.name} + {folder.photos[p.partner].path.name}: {p.reason}"
               + (f", {p.refinement.inliers} inliers, rotation corrected by {p.refinement.rotation_correction_deg:.2f} deg"
                  if p.refinement and p.refinement.inliers else "")
               + (f", {len(p.cloud)} points" if p.cloud is not None else ""))
+    if not any(p.cloud is not None for p in result.pairs):
+        raise ValueError(f"{args.folder}: none of {len(result.pairs)} photo pairs gave points (reasons above): "
+                         f"nothing to map")
     paths = write_photo_run(result, args.out, f"layerpilot map images: {args.folder.name}")
     print(f"wrote {args.out} ({paths['html'] if 'html' in paths else ', '.join(map(str, paths.values()))})")
