@@ -62,7 +62,7 @@ def test_secrets_are_private_files_and_reused(tmp_path, mission_bus):
     d = secrets.directory
     assert stat.S_IMODE(d.stat().st_mode) == 0o700
     users = set(grants(["uav1", "uav2"]))
-    assert users == {"map-server", "operator"} | {f"{r}-{v}" for r in ("sim", "link", "depth", "decide")
+    assert users == {"map-server", "operator"} | {f"{r}-{v}" for r in ("sim", "camera", "link", "depth", "decide")
                                                    for v in ("uav1", "uav2")}
     for f in [secrets.dictionary, secrets.acl_file] + [secrets.credentials_file(u) for u in users]:
         assert stat.S_IMODE(f.stat().st_mode) == 0o600, f

@@ -3,6 +3,7 @@ on real Zenoh -> posed frames the depth service turns into a cloud; interpolatio
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import threading
@@ -13,7 +14,7 @@ import pytest
 
 from layerpilot.bus import keys
 from layerpilot.bus.messages import State, decode_frame, encode_state
-from layerpilot.bus.session import BusConfig, free_endpoint, open_session, publish
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.config import ConfigError
 from layerpilot.geometry import Pose
 from layerpilot.mission.camera_track import CameraSettings, ClockOffset, PoseTrack, slerp
@@ -21,7 +22,7 @@ from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
 from layerpilot.nodes.camera import CameraNode
 from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig, camera_pose
 
-from conftest import wait_for
+from conftest import cli_process, wait_for
 
 WORLD = WorldConfig(seed=11, size=120.0, trees_per_hectare=300.0, clearings=2, tile_size=30.0)
 CAMERA = CameraConfig(width=320, height=240, hfov_deg=80.0, pitch_deg=70.0)
@@ -69,6 +70,17 @@ def flight(tmp_path_factory):
     return video, calibration, {round(f.stamp, 6): f for f in frames}
 
 
+def send_poses(session, key: str) -> None:
+    """The recorded pose stream (with its gap), as the link node stamps it, once a subscriber listens."""
+    publisher = session.declare_publisher(key)
+    try:
+        wait_for(lambda: publisher.matching_status.matching, "a subscriber of the pose key")
+        for t in POSE_TIMES:
+            publisher.put(encode_state(State(t, "uav1", body(t), armed=True, mode="GUIDED")))
+    finally:
+        publisher.undeclare()
+
+
 def settings(video, calibration, **changes) -> CameraSettings:
     return CameraSettings(source=str(video), calibration=str(calibration), pitch_deg=CAMERA.pitch_deg,
                           offset=OFFSET, max_gap=0.5, file_start=FILE_START, **changes)
@@ -84,14 +96,8 @@ def test_video_file_frames_get_interpolated_poses_gaps_are_dropped_and_depth_mak
     node = CameraNode(node_session, "uav1", settings(video, calibration))
     try:
         node.start()
-        poses = [encode_state(State(t, "uav1", body(t), armed=True, mode="GUIDED")) for t in POSE_TIMES]
-
-        def send_poses() -> bool:  # the recorded stream, as the link node stamps it; again until the route is up
-            for payload in poses:
-                publish(test_session, k.pose, payload)
-            return len(node.track) == len(POSE_TIMES)  # a repeated stamp is ignored
-
-        wait_for(send_poses, "the recorded poses to arrive")
+        send_poses(test_session, k.pose)
+        wait_for(lambda: len(node.track) == len(POSE_TIMES), "the recorded poses to arrive")
         node.run(threading.Event())  # returns at the file's end
         wait_for(lambda: len(got) == node.published, "every published frame to arrive")
     finally:
@@ -181,3 +187,49 @@ def _closed_port() -> int:
     from conftest import free_tcp_port
 
     return free_tcp_port()
+
+
+def test_layerpilot_camera_runs_a_video_file_to_its_end_against_the_pose_stream(flight, tmp_path):
+    video, calibration, _ = flight
+    mission = tmp_path / "camera.toml"
+    mission.write_text(f"[camera]\npitch_deg = {CAMERA.pitch_deg}\noffset = {OFFSET}\nmax_gap = 0.5\n")
+    ep = free_endpoint()
+    session = open_session(BusConfig(endpoint=ep))
+    k = keys.Keys("uav1")
+    got = []
+    sub = session.declare_subscriber(k.camera, lambda s: got.append(decode_frame(s.payload.to_bytes()).frame.stamp))
+    try:
+        with cli_process("camera", "--config", str(mission), "--endpoint", ep, "--source", str(video),
+                         "--calibration", str(calibration), "--file-start", str(FILE_START),
+                         "--status-every", "30") as proc:
+            ready = json.loads(proc.stdout.readline())
+            assert (ready["node"], ready["status"], ready["kind"]) == ("camera", "ready", "file"), ready
+            send_poses(session, k.pose)  # the file's first frame waits for the first pose
+            last = json.loads(proc.stdout.readline())
+            assert proc.wait(timeout=30) == 0, proc.stderr.read()
+        wait_for(lambda: len(got) == last["published"], "the published frames")
+    finally:
+        sub.undeclare()
+        session.close()
+    assert last["status"] == "stopped" and last["read"] == FRAMES and last["published"] == FRAMES - 8
+    assert last["dropped"] == {"before the first pose": 1, "telemetry gap": 5, "after the newest pose": 2}
+    assert last["errors"] == 0 and len(got) == FRAMES - 8
+
+
+def test_a_mission_with_a_real_camera_runs_the_camera_node_in_the_sim_nodes_place(tmp_path):
+    import argparse
+
+    from layerpilot.bus.security import grants, node_user
+    from layerpilot.cli.link import link_settings
+    from layerpilot.mission.config import load_mission
+    from layerpilot.nodes.up import node_commands
+
+    path = tmp_path / "real.toml"
+    path.write_text('[camera]\nsource = "rtsp://192.168.1.20/live"\ncalibration = "cam.yaml"\n'
+                    '[link.link]\nurl = "udpin:0.0.0.0:14550"\n')
+    mission = load_mission(path)
+    names = [n.name for n in node_commands(path, mission.vehicles, None, frames="camera")]
+    assert names == ["map-server", "camera/uav1", "link/uav1", "depth/uav1", "decide/uav1"]
+    assert link_settings(argparse.Namespace(mavlink=None), mission, "uav1").link.url == "udpin:0.0.0.0:14550"
+    k, grant = keys.Keys("uav1"), grants(["uav1"])[node_user("camera", "uav1")]
+    assert grant.publish == (k.camera, k.health("camera")) and grant.subscribe == (k.pose,)

@@ -41,7 +41,7 @@ from layerpilot.config import ConfigError
 
 _log = logging.getLogger("layerpilot.bus")
 OPERATOR = "operator"
-VEHICLE_ROLES = ("sim", "link", "depth", "decide")
+VEHICLE_ROLES = ("sim", "camera", "link", "depth", "decide")
 MAP_SERVER = "map-server"
 OPERATOR_QUERIES = ("stats", "layers", "voxels")  # the operator's read-only map services; "save" only if allowed
 
@@ -70,6 +70,7 @@ def grants(vehicles: list[str], operator_can_save: bool = False) -> dict[str, Gr
     for v in vehicles:  # every node also puts its own health key, nothing else of another node's
         k = keys.Keys(v)
         out[node_user("sim", v)] = Grant(publish=(k.camera, k.health("sim")), subscribe=(k.pose,))  # pose: camera-only
+        out[node_user("camera", v)] = Grant(publish=(k.camera, k.health("camera")), subscribe=(k.pose,))  # a real camera
         out[node_user("link", v)] = Grant(publish=(k.pose, k.health("link")),
                                           subscribe=(k.waypoint, k.state))  # state: battery RTL
         out[node_user("depth", v)] = Grant(publish=(k.cloud, k.health("depth")), subscribe=(k.camera,))

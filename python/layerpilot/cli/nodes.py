@@ -1,4 +1,4 @@
-"""Node processes: `layerpilot map-server|decide`, `layerpilot router`, `layerpilot up`, and
+"""Node processes: `layerpilot map-server|decide|camera`, `layerpilot router`, `layerpilot up`, and
 ``add_node_command``, how every `layerpilot ROLE` runs its bus node in this process.
 
 `sim`, `link` and `depth` (cli.sim, cli.link, cli.depth) add their node commands here too,

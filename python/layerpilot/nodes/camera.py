@@ -5,7 +5,7 @@ video file with OpenCV's ``VideoCapture``. A frame is stamped on the mission clo
 frame ``i`` at ``file_start + i / fps``; a live frame at its arrival, moved onto the mission
 clock by the offset learnt from the link node's pose stream (mission.camera_track.ClockOffset),
 less ``latency``. It waits for a pose at or after its time while the pose stream keeps coming
-(one at least every ``max_gap`` seconds), gets the interpolated camera pose
+(one at least every ``max_gap`` seconds; a file's frames wait for the first pose too), gets the interpolated camera pose
 (mission.camera_track.PoseTrack) or is dropped with the reason counted, is undistorted with the
 calibration and goes out on ``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
 0, saying so); a device or stream that stops giving frames is reopened with a doubling wait up to
@@ -148,10 +148,13 @@ class CameraNode:
         return True
 
     def _camera_pose(self, stamp: float):
-        """Wait for a pose at or after ``stamp`` while poses keep coming, then interpolate (None: dropped)."""
+        """Wait for a pose at or after ``stamp`` while poses keep coming (a file's frames also wait for the
+        first pose: a replayed pose stream may start after the node), then interpolate (None: dropped)."""
         with self._cond:
             while (self.track.newest < stamp and not self.stop_event.is_set()
-                   and time.monotonic() - self._pose_heard <= self.settings.max_gap):
+                   and (time.monotonic() - self._pose_heard <= self.settings.max_gap
+                        or (self.kind == "file" and not len(self.track)))):
+                self.supervisor.beat("camera")
                 self._cond.wait(0.05)
             return self.track.camera_at(stamp)
 

@@ -88,8 +88,9 @@ class NodeProcess:
 
 def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
                   secrets=None, resume: bool = False, clock_start: float = 0.0,
-                  mission_id: str = "") -> list[NodeProcess]:
-    """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide; with
+                  mission_id: str = "", frames: str = "sim") -> list[NodeProcess]:
+    """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide (``frames``:
+    ``camera`` runs `layerpilot camera` in the sim node's place, for a real camera); with
     ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file;
     ``resume``: the decide nodes continue the saved survey (``decide --resume``); ``clock_start``:
     where the sim and link nodes' stamps start on the mission clock (``--clock-start``);
@@ -104,7 +105,7 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
 
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
-        for role in ("sim", "link", "depth", "decide"):
+        for role in (frames, "link", "depth", "decide"):
             own = {"decide": ["--mission-id", mission_id] + (["--resume"] if resume else []),
                    "sim": ["--clock-start", repr(clock_start)], "link": ["--clock-start", repr(clock_start)]}
             argv = base + [role, "--vehicle", v] + common + login(role, v) + own.get(role, [])
@@ -209,7 +210,8 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
     mission_id = uuid.uuid4().hex[:12]
-    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id),
+    sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id,
+                                   "sim" if m.camera.source == "sim" else "camera"),
                      Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud
