@@ -82,6 +82,17 @@ def test_stale_columns_are_gaps_and_a_time_only_behavior_stops_when_it_covers_no
     assert (stale.waypoints[:, 0] < 0).sum() > 10  # the stale western half is flown too
     time_only = plan_next_flight(columns, load_behavior("time"), footprint=15, max_idle=5)
     assert time_only.decisions > len(time_only.waypoints)  # its choices over seen cells were not kept
+    assert (fresh.stopped, stale.stopped, time_only.stopped) == ("coverage", "max_waypoints", "max_idle")
+    assert fresh.coverage >= 0.95 and len(fresh.waypoints) < 100
+
+
+def test_plan_next_says_when_it_stopped_at_the_waypoint_cap(tmp_path, capsys):
+    half_seen_map().save(tmp_path / "map.ot")
+    assert main(["plan", "next", str(tmp_path), "--behavior", "exploration", "--origin", *map(str, ORIGIN),
+                 "--footprint", "15", "--max-waypoints", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "plan: 3 waypoints" in out
+    assert "stopped: --max-waypoints 3 reached before the target coverage (95%)" in out
 
 
 def test_the_plan_file_is_what_qgroundcontrol_reads(planned):

@@ -52,4 +52,10 @@ def _next(args: argparse.Namespace) -> None:
     print(f"gaps: {plan.gaps.sum() * cell:.0f} m² of the area of interest unobserved or stale")
     print(f"plan: {len(plan.waypoints)} waypoints ({plan.decisions} decisions, behavior {args.behavior}) "
           f"cover {100 * plan.coverage:.1f}% of the gaps")
+    print("stopped: " + {"no gaps": "no gap to cover",
+                         "coverage": f"the target coverage ({100 * args.coverage:.0f}%) reached",
+                         "max_waypoints": f"--max-waypoints {args.max_waypoints} reached before the target coverage "
+                                          f"({100 * args.coverage:.0f}%)",
+                         "max_idle": "the behavior kept choosing places already seen (max_idle choices in a row)"
+                         }[plan.stopped])
     print(f"wrote {out}")

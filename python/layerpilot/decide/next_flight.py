@@ -36,6 +36,7 @@ class FlightPlan:
     gaps: np.ndarray  # bool (h, w): cells of the area unobserved or stale at planning time
     covered: np.ndarray  # bool (h, w): gap cells under some waypoint's footprint
     decisions: int  # choices the decision maker made (kept waypoints and skipped ones)
+    stopped: str = "coverage"  # why it ended: "no gaps", "coverage" (target reached), "max_waypoints", "max_idle"
 
     @property
     def coverage(self) -> float:
@@ -96,7 +97,11 @@ def plan_next_flight(
     waypoints: list[tuple[float, float, float]] = []
     decisions = idle = 0
     t = now
-    while gaps.any() and covered.sum() < target_coverage * gaps.sum() and len(waypoints) < max_waypoints:
+    stopped = "no gaps" if not gaps.any() else "coverage"
+    while gaps.any() and covered.sum() < target_coverage * gaps.sum():
+        if len(waypoints) >= max_waypoints:
+            stopped = "max_waypoints"
+            break
         layers = compute_layers(state.columns(), LayerContext(now=t, home=home, position=position,
                                                               options=behavior.layers, aoi=zone),
                                 behavior.layer_names)
@@ -112,9 +117,10 @@ def plan_next_flight(
         else:
             idle += 1
             if idle >= max_idle:
+                stopped = "max_idle"
                 break
         t += 1.0  # one decision tick on the plan's clock: what just got seen is the freshest
-    return FlightPlan(np.array(waypoints, float).reshape(-1, 3), gaps, covered, decisions)
+    return FlightPlan(np.array(waypoints, float).reshape(-1, 3), gaps, covered, decisions, stopped)
 
 
 @dataclass
