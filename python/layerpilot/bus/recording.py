@@ -63,8 +63,13 @@ class RecordingWriter:
 
     def __init__(self, path: str | Path, mission_text: str = "") -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")
+        if self.path.parent.exists() and not self.path.parent.is_dir():
+            raise NotADirectoryError(f"cannot write the recording {self.path}: {self.path.parent} is not a folder")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "wb")
+        except OSError as exc:
+            raise type(exc)(f"cannot write the recording {self.path}: {exc.strerror} ({exc.filename})") from None
         self._mcap = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD, enable_crcs=True)
         self._mcap.start(profile="", library="layerpilot")
         if mission_text:

@@ -109,7 +109,7 @@ def _record(args: argparse.Namespace) -> int:
         recorder = Recorder(session, args.out, resolve(args.config).read_text())
     except OSError as exc:
         session.close()
-        raise OSError(f"out: cannot write the recording {args.out!r}: {exc.strerror or exc}") from None
+        raise OSError(f"out: {exc}") from None
     print(json.dumps({"node": "record", "status": "ready", "out": args.out}), flush=True)
     try:
         _wait(args.duration)

@@ -221,7 +221,7 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
             recorder = Recorder(session, record, path.read_text())
         except OSError as exc:
             session.close()
-            raise OSError(f"--record: cannot write the recording {str(record)!r}: {exc.strerror or exc}") from None
+            raise OSError(f"--record: {exc}") from None
     sup.start()
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/; mission {mission_id}"
