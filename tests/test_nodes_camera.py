@@ -7,6 +7,7 @@ import json
 import logging
 import math
 import threading
+import time
 
 import cv2
 import numpy as np
@@ -154,6 +155,101 @@ def test_slerp_and_track_interpolate_a_turn_and_count_why_frames_are_dropped():
         CameraSettings(offset=[0.0, float("nan"), 0.0])
     with pytest.raises(ConfigError, match="camera.max_gap"):
         CameraSettings(max_gap=0.0)
+
+
+class _MjpegStream:
+    """An HTTP MJPEG stream (what many IP cameras serve): 10 frames at 20 Hz per connection, then it drops."""
+
+    def __init__(self) -> None:
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+        jpegs = [cv2.imencode(".jpg", np.full((120, 160, 3), 20 * i, np.uint8))[1].tobytes() for i in range(10)]
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:
+                self.send_response(200)
+                self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
+                self.end_headers()
+                for jpeg in jpegs:
+                    try:
+                        self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n"
+                                         % len(jpeg) + jpeg + b"\r\n")
+                        self.wfile.flush()
+                    except (BrokenPipeError, ConnectionResetError):  # the node stopped reading
+                        return
+                    time.sleep(0.05)
+
+            def log_message(self, *args) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/live.mjpg"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def live_body(t: float) -> Pose:
+    return Pose.from_euler(0.0, 0.0, 0.2 * (t - 500.0), (t - 500.0, 2.0 * (t - 500.0), 30.0))
+
+
+def test_a_live_stream_is_stamped_on_the_autopilots_clock_and_reopened_when_it_drops(flight, caplog):
+    _, calibration, _ = flight
+    stream = _MjpegStream()
+    ep = free_endpoint()
+    node_session, test_session = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
+    k = keys.Keys("uav1")
+    got = []  # (frame, mission time it arrived here)
+    t0 = time.monotonic()
+    autopilot = lambda: 500.0 + time.monotonic() - t0  # noqa: E731 - the autopilot's clock: another origin
+    sub = test_session.declare_subscriber(k.camera, lambda s: got.append(
+        (decode_frame(s.payload.to_bytes()).frame, autopilot())))
+    node = CameraNode(node_session, "uav1", settings(stream.url, calibration, latency=0.1, reconnect_max=0.5))
+    stop, poses_done = threading.Event(), threading.Event()
+    publisher = test_session.declare_publisher(k.pose)
+
+    def link() -> None:  # the link node: poses at 20 Hz on the autopilot's clock
+        while not poses_done.wait(0.05):
+            t = autopilot()
+            publisher.put(encode_state(State(t, "uav1", live_body(t))))
+
+    pose_thread = threading.Thread(target=link)
+    try:
+        node.start()
+        wait_for(lambda: publisher.matching_status.matching, "a subscriber of the pose key")
+        pose_thread.start()
+        wait_for(lambda: len(node.track) >= 3, "the first poses")
+        with caplog.at_level(logging.INFO, "layerpilot.camera"):
+            runner = threading.Thread(target=node.run, args=(stop,))
+            runner.start()
+            wait_for(lambda: node.published >= 14 and node.reconnects >= 1, "frames from a second connection")
+            stop.set()
+            runner.join()
+        wait_for(lambda: len(got) == node.published, "every published frame to arrive")
+    finally:
+        poses_done.set()
+        if pose_thread.is_alive():
+            pose_thread.join()
+        sub.undeclare()
+        node.stop()
+        publisher.undeclare()
+        node_session.close()
+        test_session.close()
+        stream.close()
+
+    messages = [r.getMessage() for r in caplog.records]
+    assert sum("no frame (unplugged, busy or the stream dropped)" in m for m in messages) >= 1
+    assert any(m.endswith(": frames again") for m in messages)
+    assert node.track.dropped == {} and len(got) == node.published
+    for frame, arrived in got:
+        # on the autopilot's clock (500 s ahead of this one), exposure = arrival less the 0.1 s latency
+        assert 0.1 - 1e-9 <= arrived - frame.stamp < 0.6, (arrived, frame.stamp)
+        truth = live_body(frame.stamp) @ CameraSettings(pitch_deg=CAMERA.pitch_deg, offset=OFFSET).mount
+        assert np.abs(frame.pose.position - truth.position).max() < 1e-6
+        assert np.abs(frame.pose.rotation - truth.rotation).max() < 1e-6
+        assert frame.intrinsics == CAMERA.intrinsics.scaled(0.5)  # the 320x240 calibration at 160x120
 
 
 def test_a_refused_stream_is_reopened_with_growing_waits_and_a_bad_file_is_named(flight, tmp_path, caplog):

@@ -96,14 +96,17 @@ class CameraNode:
         while not (stop.wait(WAKE_PERIOD) or self.ended.is_set() or self.supervisor.failed.is_set()):
             pass
         self.stop_event.set()
+        self.supervisor.join(timeout=self.settings.reconnect_max + 2.0)  # the frame in hand goes out first
 
     def stop(self) -> None:
         self.stop_event.set()
         if self._sub is not None:
             self._sub.undeclare()
+            self._sub = None
         self.supervisor.join(timeout=self.settings.reconnect_max + 2.0)
         if self._cap is not None:
             self._cap.release()
+            self._cap = None
 
     def _open(self) -> bool:
         src = self.settings.source
