@@ -12,6 +12,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.cli import main
+from layerpilot.cli.link import _flown
+from layerpilot.geodesy import LocalFrame
 from layerpilot.link.connection import open_connection
 from layerpilot.link.mission_transfer import MissionItem
 from layerpilot.link.qgc_plan import Plan, plan_from_waypoints, read_plan, write_plan
@@ -139,3 +141,39 @@ def test_a_waypoint_outside_the_geofence_is_refused_before_anything_is_uploaded(
     assert len(err) == 1 and err[0].startswith("layerpilot link fly-plan: error: item 2 of the plan: ")
     assert "180.0 m outside the geofence" in err[0] and err[0].endswith("(nothing uploaded)")
     assert endpoint.mission.items == [] and not endpoint.armed
+
+
+def ending(kind: str) -> list[MissionItem]:
+    """A waypoint, a DO_CHANGE_SPEED (lat/lon 0, as QGC writes it) and a final LAND at another place at
+    altitude 0 (as QGC writes it), or a final RTL at lat/lon 0."""
+    wp = plan_from_waypoints(np.array([[12.0, 0.0, 8.0], [0.0, 15.0, 8.0]]), SITL_DATUM).items
+    speed = MissionItem(0.0, 0.0, 0.0, command=mav.MAV_CMD_DO_CHANGE_SPEED, params=(1.0, 5.0, -1.0, 0.0))
+    last = MissionItem(wp[1].lat, wp[1].lon, 0.0, command=mav.MAV_CMD_NAV_LAND, params=(0.0, 0.0, 0.0, math.nan)) \
+        if kind == "land" else MissionItem(0.0, 0.0, 0.0, command=mav.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    return [wp[0], speed, last]
+
+
+@pytest.mark.parametrize("kind, landed_at", [("land", (0.0, 15.0)), ("rtl", (0.0, 0.0))])
+def test_a_plan_ending_in_land_or_rtl_is_flown_to_the_ground_and_succeeds(vehicle, tmp_path, capsys, kind, landed_at):
+    """Items without a place (lat/lon 0: an RTL, a DO_ item) are not fenced as a point 5,337 km away; a LAND
+    at altitude 0 is not under the fence's 2 m floor; the LAND flies to its point before it comes down; the
+    disarm on the ground at the end is the mission done (exit 0)."""
+    endpoint, url = vehicle
+    path = write_plan(tmp_path / f"{kind}.plan", Plan(ending(kind), (SITL_DATUM.lat, SITL_DATUM.lon, SITL_DATUM.alt)))
+    watcher = Watcher(url)
+    try:
+        assert main(["link", "--mavlink", url, "--timeout", "60", "fly-plan", str(path)]) == 0, \
+            capsys.readouterr().err
+    finally:
+        watcher.close()
+    out = capsys.readouterr().out
+    assert "fly-plan: 3 mission items accepted by system 1" in out and "fly-plan: done" in out
+    assert f"mission: item 3 of 3 ({kind.upper()}) ended on the ground, disarmed" in out
+    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1, 2]  # the waypoint, the DO item at once
+    assert not endpoint.armed and endpoint.pose().position[2] == pytest.approx(0.0, abs=0.05)
+    assert np.linalg.norm(endpoint.pose().position[:2] - landed_at) < 0.5, endpoint.pose().position
+    # the flight's default bound (60 s + 3 s per metre) goes over where the items fly: 12 m out, then 19.2 m
+    # to the LAND's point (or 12 m home) and 8 m down, not to lat/lon 0
+    flown = _flown(read_plan(path), LocalFrame(*read_plan(path).home), 0.0)
+    assert [(number, np.round(point, 1).tolist()) for number, _, point in flown] == [
+        (1, [12.0, 0.0, 8.0]), (3, [*landed_at, 0.0])]

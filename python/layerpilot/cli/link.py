@@ -179,13 +179,40 @@ def _plan_to_fly(args: argparse.Namespace):
     return plan
 
 
+def _flown(plan, frame, home_z: float) -> list:
+    """Where the items of ``plan`` take the vehicle, in order from home: (item number, item, map-frame point in
+    ``frame``, where home is at ``home_z``). Lat and lon 0 are where the vehicle is (MissionItem.place, as
+    ArduPilot's AUTO and the simulator's fly them); a LAND ends on the ground below its point, an RTL at home;
+    DO_* and CONDITION_* items fly nowhere and are left out."""
+    import numpy as np
+
+    from layerpilot.link.mission_transfer import LAND, RTL
+
+    x, y, _ = frame.from_geodetic(plan.home[0], plan.home[1], 0.0)
+    home = np.array([float(x), float(y), home_z])
+    here, flown = home, []
+    for number, item in enumerate(plan.items, 1):
+        if item.command == RTL:
+            here = home
+        elif item.flies:
+            here = item.place(frame, home_z, here)
+            if item.command == LAND:
+                here[2] = home_z
+        else:
+            continue
+        flown.append((number, item, here))
+    return flown
+
+
 def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
     """Upload ``plan`` over a connection of its own (closed before the flight link opens the URL); only to
-    ArduPilot, whose AUTO the flight uses, and only when every item lies inside the geofence (placed in the
-    vehicle's frame). MissionTransferError when the vehicle does not answer or refuses, or an item is outside."""
+    ArduPilot, whose AUTO the flight uses, and only when every place the plan flies to lies inside the
+    geofence (placed in the vehicle's frame; a LAND's only in the area: it ends on the ground, below the
+    altitude floor; an RTL's is home). MissionTransferError when the vehicle does not answer or refuses, or
+    an item is outside."""
     from layerpilot.link.connection import open_connection
     from layerpilot.link.geofence import OutsideGeofence
-    from layerpilot.link.mission_transfer import MissionTransferError, upload_mission, vehicle_frame
+    from layerpilot.link.mission_transfer import LAND, RTL, MissionTransferError, upload_mission, vehicle_frame
     from layerpilot.link.qgc_plan import ARDUPILOT, mission_items
 
     wait = config.connect_timeout_s if args.timeout is None else args.timeout
@@ -197,9 +224,12 @@ def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
                                        "ArduPilot (upload it with `layerpilot link upload` and fly it there)")
         target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
         frame, home_z = vehicle_frame(conn, target, wait)
-        for i, item in enumerate(plan.items, 1):
+        for i, item, point in _flown(plan, frame, home_z):
             try:
-                geofence.check(*item.place(frame, home_z), home_z)
+                if item.command in (LAND, RTL):
+                    geofence.check_area(*point)
+                else:
+                    geofence.check(*point, home_z)
             except OutsideGeofence as exc:
                 raise MissionTransferError(f"item {i} of the plan: {exc} (nothing uploaded)") from None
         upload_mission(conn, mission_items(plan, ARDUPILOT), target, timeout=args.item_timeout, retries=args.retries)
@@ -209,26 +239,36 @@ def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
 
 
 def _fly_mission(link, plan, bound: dict) -> None:
-    """Take off in GUIDED to the first item's altitude when on the ground, then AUTO until the last item is
-    reached (ArduPilot numbers the plan's items from 1: item 0 is home). Without --timeout the flight may
-    take 60 s plus 3 s per metre of the plan's path from home."""
+    """Take off in GUIDED to the first flown item's altitude when on the ground, then AUTO until the last
+    item is reached (ArduPilot numbers the plan's items from 1: item 0 is home) or, when it is a LAND or an
+    RTL, until the vehicle disarmed on the ground there. Without --timeout the flight may take 60 s plus
+    3 s per metre of the plan's path from home."""
     import numpy as np
 
     from layerpilot.geodesy import LocalFrame
-    from layerpilot.link.mission_transfer import GLOBAL
+    from layerpilot.link.link import ControlLost
+    from layerpilot.link.mission_transfer import LAND, RTL
 
-    frame = LocalFrame(*plan.home)
-    rel = np.array([item.alt - plan.home[2] if item.frame == GLOBAL else item.alt for item in plan.items])
-    x, y, _ = frame.from_geodetic([i.lat for i in plan.items], [i.lon for i in plan.items], 0.0)
-    path = np.vstack([[0.0, 0.0, 0.0], np.column_stack([x, y, rel])])
+    flown = _flown(plan, LocalFrame(*plan.home), 0.0)
+    path = np.vstack([[0.0, 0.0, 0.0]] + [point for _, _, point in flown])
     timeout = bound.get("timeout", 60.0 + 3.0 * float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()))
     if not link.armed:
         link.start_guided()
         link.arm()
-        link.takeoff(float(rel[0]), **bound)
-    n = len(plan.items)
-    link.fly_mission(n, timeout, lambda kind, seq: print(
-        f"mission: {'flying to' if kind == 'current' else 'reached'} item {seq} of {n}", flush=True))
+        link.takeoff(float(flown[0][2][2]) if flown else 0.0, **bound)
+    n, current = len(plan.items), [0]
+
+    def progress(kind: str, seq: int) -> None:
+        current[0] = seq if kind == "current" else current[0]
+        print(f"mission: {'flying to' if kind == 'current' else 'reached'} item {seq} of {n}", flush=True)
+
+    try:
+        link.fly_mission(n, timeout, progress)
+    except ControlLost as exc:  # a final LAND or RTL ends in a disarm on the ground: the mission is done
+        if not (exc.kind == "disarmed" and current[0] == n and plan.items[-1].command in (LAND, RTL)):
+            raise
+        print(f"mission: item {n} of {n} ({'LAND' if plan.items[-1].command == LAND else 'RTL'}) ended on the "
+              "ground, disarmed", flush=True)
 
 
 def _autopilot_heartbeat(conn, config, wait: float):

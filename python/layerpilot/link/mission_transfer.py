@@ -26,6 +26,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from layerpilot.geodesy import LocalFrame
 
 NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT  # 16
+LAND = mav.MAV_CMD_NAV_LAND  # 21: where it is or at its place, down to the ground, then disarmed
+RTL = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH  # 20: home, whatever its lat/lon say
 GLOBAL_RELATIVE_ALT = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT  # 3: altitude above home
 GLOBAL = mav.MAV_FRAME_GLOBAL  # 0: altitude above mean sea level (ArduPilot's home item)
 RELATIVE_FRAMES = (GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
@@ -63,10 +65,19 @@ class MissionItem:
                                       *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)),
                                       float(self.alt), mav.MAV_MISSION_TYPE_MISSION)
 
-    def place(self, frame: LocalFrame, home_z: float) -> np.ndarray:
+    @property
+    def flies(self) -> bool:
+        """Whether the vehicle flies somewhere for this item: a NAV command other than RTL (whose place is
+        home, whatever the item says); DO_* and CONDITION_* items change settings where the vehicle is."""
+        return self.command <= mav.MAV_CMD_NAV_LAST and self.command != RTL
+
+    def place(self, frame: LocalFrame, home_z: float, here: np.ndarray | None = None) -> np.ndarray:
         """The item's point in the map frame ``frame`` (x, y, z metres); ``home_z``: home's z there, which
-        the altitude is relative to in the GLOBAL_RELATIVE_ALT frames (GLOBAL: above mean sea level)."""
+        the altitude is relative to in the GLOBAL_RELATIVE_ALT frames (GLOBAL: above mean sea level).
+        Lat and lon both 0 mean where the vehicle is (ArduPilot's rule): ``here``'s x, y when given."""
         x, y, _ = frame.from_geodetic(self.lat, self.lon, 0.0)
+        if here is not None and self.lat == 0.0 and self.lon == 0.0:
+            x, y = here[0], here[1]
         z = home_z + self.alt if self.frame in RELATIVE_FRAMES else self.alt - frame.alt
         return np.array([float(x), float(y), float(z)])
 

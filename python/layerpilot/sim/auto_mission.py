@@ -7,8 +7,10 @@ is reached within its acceptance radius (param2; 0 means WPNAV_RADIUS, 2 m) - fl
 through when a waypoint follows without a hold, else once stopped there - then holds param1
 seconds; it faces the waypoint on the way (WP_YAW_BEHAVIOR 2) unless param4 gives a
 heading. NAV_TAKEOFF climbs to its altitude where the vehicle is. NAV_LAND (flown to its
-place first when it has one) and NAV_RETURN_TO_LAUNCH hand the vehicle to the endpoint's
-landing and RTL, which end in a disarm. Starting an item sends MISSION_CURRENT and the
+place first when it has one, at the height it is at, until stopped there within WPNAV_RADIUS)
+and NAV_RETURN_TO_LAUNCH hand the vehicle to the endpoint's landing and RTL, which end in a
+disarm. A DO_* item (the simulator knows DO_CHANGE_SPEED) is done at once, as ArduCopter starts
+it on the way. Starting an item sends MISSION_CURRENT and the
 STATUSTEXT ``Mission: N WP``; completing one ``Reached command #N`` and MISSION_ITEM_REACHED.
 After the last item the mission is complete and the vehicle loiters where it is, still in
 AUTO (ArduCopter's exit_mission). Leaving AUTO and coming back resumes at the current item
@@ -18,6 +20,7 @@ AUTO (ArduCopter's exit_mission). Leaving AUTO and coming back resumes at the cu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -39,10 +42,12 @@ class AutoMission:
     """One run of a stored mission; the endpoint calls :meth:`step` every step while in AUTO and airborne."""
 
     def __init__(self, mavlink: mav.MAVLink, items: list[MissionItem], frame: LocalFrame, home: np.ndarray,
-                 first: int = 1) -> None:
+                 run: Callable[[MissionItem], None], first: int = 1) -> None:
+        """``run``: the endpoint's way of doing a DO_* item (as its COMMAND_LONG would)."""
         if len(items) <= first:
             raise ValueError(f"mission: no items to fly after item {first - 1}")
         self._mav = mavlink
+        self._run = run
         self.items = items
         self._frame = frame
         self._home = home
@@ -55,18 +60,11 @@ class AutoMission:
     def state(self) -> int:
         return mav.MISSION_STATE_COMPLETE if self.complete else mav.MISSION_STATE_ACTIVE
 
-    def place(self, item: MissionItem, here: np.ndarray) -> np.ndarray:
-        """The map-frame point of ``item``; lat and lon 0 mean ``here``'s x, y (ArduPilot's rule)."""
-        point = item.place(self._frame, float(self._home[2]))
-        if item.lat == 0.0 and item.lon == 0.0:
-            point[:2] = here[:2]
-        return point
-
     def resume(self, vehicle: Multicopter) -> None:
         """(Re)start the current item: AUTO entered, or the next item."""
         item = self.items[self.current]
         self._reached_at = None
-        self._target = self.place(item, vehicle.position)
+        self._target = item.place(self._frame, float(self._home[2]), vehicle.position)
         if item.command == mav.MAV_CMD_NAV_TAKEOFF:
             self._target[:2] = vehicle.position[:2]
         elif item.command == mav.MAV_CMD_NAV_LAND:
@@ -86,9 +84,14 @@ class AutoMission:
         item = self.items[self.current]
         if item.command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return "rtl"
+        if not item.flies:  # a DO_* item: done at once, on the way
+            self._run(item)
+            self._advance(vehicle)
+            return ""
         error = vehicle.position - self._target
-        if item.command == mav.MAV_CMD_NAV_LAND:
-            return "land" if float(np.hypot(error[0], error[1])) <= WPNAV_RADIUS_M else ""
+        if item.command == mav.MAV_CMD_NAV_LAND:  # ArduCopter flies to the point, then lands where it stopped
+            there = float(np.hypot(error[0], error[1])) <= WPNAV_RADIUS_M
+            return "land" if there and float(np.linalg.norm(vehicle.velocity)) <= STOPPED_M_S else ""
         hold = item.params[0] if item.command == mav.MAV_CMD_NAV_WAYPOINT and item.params[0] > 0.0 else 0.0
         if item.command == mav.MAV_CMD_NAV_TAKEOFF:
             arrived = abs(error[2]) <= TAKEOFF_REACHED_M

@@ -41,6 +41,7 @@ from layerpilot.geodesy import LocalFrame
 from layerpilot.link import modes
 from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_ned, ned_to_enu, yaw_enu_to_ned,
                                     yaw_ned_to_enu)
+from layerpilot.link.mission_transfer import MissionItem
 from layerpilot.sim.auto_mission import AutoMission
 from layerpilot.sim.battery import Battery, BatteryConfig
 from layerpilot.sim.mission_store import MESSAGES as MISSION_MESSAGES
@@ -353,6 +354,11 @@ class MavlinkVehicle:
             return self._send_now(mav.MAVLINK_MSG_ID_HOME_POSITION)
         return mav.MAV_RESULT_UNSUPPORTED
 
+    def _run_item(self, item: MissionItem) -> None:
+        """A DO_* mission item, as its COMMAND_LONG (the mission store takes only DO_CHANGE_SPEED)."""
+        if item.command == mav.MAV_CMD_DO_CHANGE_SPEED:
+            self._change_speed(item.params[1])
+
     def _change_speed(self, speed: float) -> int:
         """DO_CHANGE_SPEED: a horizontal cruise speed up to the airframe's limit; -1 no change, -2 default."""
         if speed == -1.0:
@@ -575,7 +581,7 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_CRITICAL, "Auto: Missing Takeoff Cmd")
             return self._refused
         if self._auto is None or self._auto.complete or self._auto.items is not items:
-            self._auto = AutoMission(self._mav, items, self.config.origin, self.home)
+            self._auto = AutoMission(self._mav, items, self.config.origin, self.home, self._run_item)
         if self.armed:
             self._auto.resume(self.vehicle)
         return None

@@ -20,7 +20,7 @@ from layerpilot.link.mission_transfer import MissionItem
 MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT",
                       "MISSION_REQUEST", "MISSION_CLEAR_ALL", "MISSION_ACK"})
 COMMANDS = frozenset({mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LAND,
-                      mav.MAV_CMD_NAV_RETURN_TO_LAUNCH})
+                      mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED})
 FRAMES = frozenset({mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_INT,
                     mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
 
