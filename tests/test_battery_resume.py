@@ -220,6 +220,23 @@ def test_up_resume_starts_the_sim_and_link_nodes_on_the_saved_mission_clock(tmp_
             survey.clock_after(tmp_path / "state", ["uav1", "uav2"])
 
 
+def test_a_new_survey_keeps_another_runs_saved_state_as_bak(tmp_path, caplog):
+    """A decide node of a new run (no --resume) does not overwrite the survey another run saved: it keeps it as
+    uav1.json.bak and says so once; a node restarted within the same run continues its predecessor's state."""
+    mission = load_mission("default", [Override("--state", "decide.state", str(tmp_path / "state"))])
+    path = survey.state_file(tmp_path / "state", "uav1")
+    survey.save(build_pilot(mission), path, 38.5, 33.5, "run1")
+    saved, bak = path.read_text(), tmp_path / "state" / "uav1.json.bak"
+    with open_session(BusConfig(endpoint=free_endpoint())) as session:
+        assert DecideNode(session, "uav1", mission, mission_id="run1").continued  # a restart: nothing set aside
+        assert path.read_text() == saved and not bak.exists()
+        DecideNode(session, "uav1", mission, mission_id="run2")
+    assert bak.read_text() == saved and not path.exists()
+    warnings = [r.getMessage() for r in caplog.records if "kept as" in r.getMessage()]
+    assert warnings == [f"a new survey (no --resume): the one saved by run run1 is kept as {bak} (rename it back "
+                        "and run `up --resume` to continue it)"]
+
+
 def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_reports_it_as_such():
     """200 mAh at 15 A: 48 s of flight; BATT_LOW_MAH 100 -> the autopilot's own RTL 24 s after arming (2.4 s
     at 10x; no idle draw: what the ground wait costs depends on the machine's load). The link node was

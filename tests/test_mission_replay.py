@@ -4,6 +4,7 @@ node's step object (and into the running node over a real Zenoh session), give b
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +20,11 @@ from layerpilot.nodes.decide import DecideNode, decision_message
 from conftest import wait_for
 
 
-def short_mission(behavior: str, world_seed: int = 0):
+def short_mission(behavior: str, state: Path, world_seed: int = 0):
+    """``state``: the decide nodes' state directory (the default mission's is relative to the working directory:
+    a test must not overwrite a survey saved there)."""
     return load_mission("default", [Override("--behavior", "decide.behavior", behavior),
+                                    Override("--state", "decide.state", str(state)),
                                     Override("--duration", "evaluation.duration", 40.0),
                                     Override("--step", "evaluation.step_s", 0.1),
                                     Override("--world-seed", "sim.world.seed", world_seed),
@@ -29,7 +33,7 @@ def short_mission(behavior: str, world_seed: int = 0):
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    mission = short_mission("balanced", world_seed=3)
+    mission = short_mission("balanced", tmp_path_factory.mktemp("state"), world_seed=3)
     result = run_mission(mission, tmp_path_factory.mktemp("lockstep"), record_inputs=True)
     assert sum(i.command is not None for i in result.pilot_inputs) >= 3
     return mission, result

@@ -59,6 +59,18 @@ def saved_mission_id(path: str | Path) -> str:
         return ""
 
 
+def set_aside(path: str | Path) -> Path | None:
+    """Keep a state that a new survey would overwrite as ``<vehicle>.json.bak`` (replacing an older one);
+    returns where it went, None if there was none. `up` without --resume after a battery swap is then
+    undone by renaming it back and `up --resume`."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    kept = path.with_name(path.name + ".bak")
+    os.replace(path, kept)
+    return kept
+
+
 def snapshot(pilot: Pilot, time: float, flown_s: float, mission_id: str = "") -> dict[str, Any]:
     """The pilot's survey state as plain JSON-ready data; ``time`` is the newest mission-clock stamp."""
     maker = pilot.maker

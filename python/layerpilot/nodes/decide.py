@@ -93,6 +93,11 @@ class DecideNode:
                               and survey.saved_mission_id(self.state_path) == mission_id)
         self.resumed = survey.load(self.pilot, self._require_state(), same_flight=self.continued) \
             if resume or self.continued else None
+        if not self.resumed and self.state_path is not None:  # a new survey: another run's saved one is kept
+            saved_by = survey.saved_mission_id(self.state_path) or "unknown"
+            if (kept := survey.set_aside(self.state_path)) is not None:
+                _log.warning("a new survey (no --resume): the one saved by run %s is kept as %s (rename it back "
+                             "and run `up --resume` to continue it)", saved_by, kept)
         self._flown_before = self.resumed["flown_s"] if self.resumed else 0.0  # mission s flown before this node
         # the same flight goes on: its time since the predecessor's last save was flown too
         self._first_stamp: float | None = self.resumed["time"] if self.continued else None

@@ -187,19 +187,21 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     vehicle has none)."""
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
+    from layerpilot.mission.resume import clock_after, state_file
     from layerpilot.nodes.runner import bus_config
 
     path = resolve(mission)
     m = load_mission(path)  # refuse a bad file before anything starts
     clock = 0.0  # mission time when the vehicles' clocks read 0: the survey's saved time when it resumes
     if resume:  # before anything starts: a survey to continue must exist
-        from layerpilot.mission.resume import clock_after, state_file
-
         missing = [v for v in m.vehicles if not m.decide.state or not state_file(m.decide.state, v).exists()]
         if missing:
             raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
                              f"({m.decide.state!r})")
         clock = clock_after(m.decide.state, m.vehicles).start  # read once: restarted nodes keep this start
+    # a new survey: the decide nodes keep a saved one aside (<vehicle>.json.bak) rather than overwrite it
+    saved = [] if resume or not m.decide.state else \
+        [v for v in m.vehicles if state_file(m.decide.state, v).exists()]
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -226,6 +228,10 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     print(f"layerpilot up: {path.name}: {len(sup.nodes)} nodes for {', '.join(m.vehicles)}; "
           f"node logs in {log_dir}/; mission {mission_id}"
           + (f", resumed at mission time {clock:.1f} s" if resume else ""), flush=True)
+    if saved:
+        print(f"layerpilot up: warning: a new survey (no --resume): the surveys saved in decide.state for "
+              f"{', '.join(saved)} are kept as <vehicle>.json.bak (rename back and `up --resume` to continue "
+              "them)", flush=True)
     print(f"layerpilot up: bus secured: operator credentials in {secrets.credentials_file('operator')}"
           if secrets else "layerpilot up: bus.security = false: ANY process that reaches "
           f"{bus.endpoint} can publish waypoints", flush=True)
