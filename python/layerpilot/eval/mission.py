@@ -240,8 +240,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
     images = dict(final_layers.layers)
     images["elevation_m"] = final_layers.elevation_m
     settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
-                "retargets": sum(r["reason"] == "retarget" for r in records),
                 "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending else "duration",
+                "retargets": sum(r["reason"] == "retarget" for r in records),
                 "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                 "frames": frames, "clouds": depth.clouds,
                 **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud

@@ -26,8 +26,8 @@ from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.layers.view_gain import CameraView
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
-from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.energy import HomeReturn
+from layerpilot.mission.heading import HeadingPolicy
 
 PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
 
