@@ -345,14 +345,18 @@ def test_decide_node_turns_home_on_the_charge_its_pose_carries_and_saves_the_sur
         node = DecideNode(node_session, "uav1", mission)
         sub = world.declare_subscriber(k.state, lambda s: heard.append(decode_mission_state(s.payload.to_bytes())))
         node.start()
-        try:
+        poses = world.declare_publisher(k.pose)
+        try:  # a pose put before the node's subscription matches is lost: wait for it
+            wait_for(lambda: poses.matching_status.matching, "the node's pose subscription", timeout=10)
             for stamp, charge, armed in ((0.0, 1.0, False), (10.0, 1.0, True), (110.0, 0.3, True)):
                 pose = Pose.from_euler(0.0, 0.0, 0.0, np.array([300.0, 400.0, 50.0]))
-                publish(world, k.pose, encode_state(State(stamp, "uav1", pose, armed=armed, battery=charge)))
-                wait_for(lambda: node.pilot.energy._last is not None and node.pilot.energy._last[0] == stamp
-                         or not armed, "the pose to reach the pilot", timeout=10)
+                poses.put(encode_state(State(stamp, "uav1", pose, armed=armed, battery=charge)))
+                wait_for(lambda: node._first_stamp is not None and (  # the flight's first pose, stepped
+                    node.pilot.energy._last is not None and node.pilot.energy._last[0] == stamp or not armed),
+                    "the pose to reach the pilot", timeout=10)
             wait_for(lambda: any(s.phase == RETURN_PHASE for s in heard), "the battery return", timeout=10)
         finally:
+            poses.undeclare()
             sub.undeclare()
             node.stop()
     assert np.allclose(heard[-1].target, (0.0, 0.0, 50.0)) and "home (drain 42.00 %/min)" in node.pilot.energy.why
