@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 
 from layerpilot.config import ConfigError, check_range
@@ -76,16 +78,35 @@ class DepthConfig:
     match: MatchConfig = field(default_factory=MatchConfig)
 
 
-# Measured presets (docs/depth.md): the disparity at the median scene depth is f * ratio, so the
-# smaller image needs a longer baseline ratio for the same relative depth error.
-PRESETS = {
-    640: DepthConfig(PickConfig(min_baseline_ratio=0.04, max_baseline_ratio=0.09, target_baseline_ratio=0.06),
-                     MatchConfig(scale=0.75, num_disparities=48, block_size=5, edge_margin=6)),
-    320: DepthConfig(PickConfig(min_baseline_ratio=0.06, max_baseline_ratio=0.12, target_baseline_ratio=0.09),
-                     MatchConfig(scale=1.0, num_disparities=48, block_size=3, min_texture=0.5, edge_margin=4)),
+# The baseline window is geometry, the same for every camera: a flight's frame spacing (speed over
+# frame rate, relative to the scene depth) does not depend on the image size, so a sharper camera must
+# accept every pair a coarser one accepts (a 640 px window of 0.04-0.09 threw away the 0.09-0.12 pairs
+# the 320 px one kept: 59.5 % mapped instead of 90 %, docs/depth.md). What follows the focal length
+# at matching scale, f_m, is in pixels: the shortest baseline gives MIN_DISPARITY px at the median
+# depth (a higher-resolution camera may take shorter ones), and the search range holds points
+# NEAR_FACTOR x closer than the median at the longest baseline.
+PICK = PickConfig(min_baseline_ratio=0.06, max_baseline_ratio=0.12, target_baseline_ratio=0.09)
+MIN_DISPARITY = 9.6  # px at matching scale: 0.06 x f_m = 160 px (320 wide, 90 deg)
+NEAR_FACTOR = 2.5  # 48 disparities at 320 px: 2.5 x 0.12 x 160 = 48
+
+# Measured matcher settings per image width (docs/depth.md); num_disparities is derived.
+MATCH = {
+    640: MatchConfig(scale=0.75, block_size=5, edge_margin=6),
+    320: MatchConfig(scale=1.0, block_size=3, min_texture=0.5, edge_margin=4),
 }
 
 
-def preset_for(width: int) -> DepthConfig:
-    """The measured preset for the nearest image width."""
-    return PRESETS[min(PRESETS, key=lambda w: abs(w - width))]
+def search_range(f_match: float, max_ratio: float) -> int:
+    """Disparities (a multiple of 16) that hold points NEAR_FACTOR x closer than the median depth."""
+    return int(16 * math.ceil(NEAR_FACTOR * f_match * max_ratio / 16 - 1e-9))
+
+
+def preset_for(width: int, fx: float | None = None) -> DepthConfig:
+    """Settings for an image ``width`` and focal length ``fx`` in pixels (default: a 90 deg camera).
+
+    The matcher settings are the measured ones of the nearest width; the baseline window and the
+    search range follow the focal length at matching scale (see the rule above)."""
+    f_match = (width / 2 if fx is None else fx) * (match := MATCH[min(MATCH, key=lambda w: abs(w - width))]).scale
+    min_ratio = min(MIN_DISPARITY / f_match, PICK.min_baseline_ratio)
+    pick = dataclasses.replace(PICK, min_baseline_ratio=min_ratio)
+    return DepthConfig(pick, dataclasses.replace(match, num_disparities=search_range(f_match, pick.max_baseline_ratio)))

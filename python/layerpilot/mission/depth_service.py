@@ -2,7 +2,7 @@
 
 One place chooses the source and its settings, so the live depth node and the lock-step
 evaluator make the same clouds: two-view stereo with the measured preset for the image
-width (chosen on the first frame), or the frame's own depth (simulator, RGB-D).
+width and focal length (chosen on the first frame), or the frame's own depth (simulator, RGB-D).
 """
 
 from __future__ import annotations
@@ -31,9 +31,10 @@ class DepthServiceConfig:
         check_range("depth.queue_size", self.queue_size, 1, 1000)
 
 
-def stereo_preset(width: int) -> DepthConfig:
-    """The stereo settings for an image width: what the service uses and what survey speeds assume."""
-    return preset_for(width)
+def stereo_preset(width: int, fx: float | None = None) -> DepthConfig:
+    """The stereo settings for an image width and focal length in pixels (default: a 90 deg camera):
+    what the service uses and what survey speeds assume."""
+    return preset_for(width, fx)
 
 
 class DepthService:
@@ -49,7 +50,7 @@ class DepthService:
     def push(self, frame: CameraFrame) -> PointCloud | None:
         """The frame's cloud, or None (no partner yet, skipped, or no points)."""
         if self.source is None:  # stereo presets depend on the image size: chosen on the first frame
-            self.source = StereoDepth(stereo_preset(frame.size[0]))
+            self.source = StereoDepth(stereo_preset(frame.size[0], frame.intrinsics.fx))
         self.frames += 1
         cloud = self.source.push(frame)
         if cloud is None or len(cloud) == 0:
