@@ -17,7 +17,8 @@ against this SITL and against layerpilot's simulated vehicle, fields side by sid
 ``up`` (`layerpilot up --mission sitl-camera --duration`: the end commands RTL, the vehicle
 comes home and disarms), ``ctrlc`` (the same mission ended by SIGINT), ``reboot``
 (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN on the ground, and the binary killed and restarted while
-`link goto` flies). It takes 10-15 minutes at --speedup 1.
+`link goto` flies), ``battery`` (the pilot's battery return, a swap, `up --resume`). All of them
+take about 17 minutes at --speedup 1.
 """
 
 from __future__ import annotations
