@@ -126,3 +126,16 @@ def test_make_source_by_name():
     assert isinstance(make_source("ground_truth"), GroundTruthDepth)
     with pytest.raises(ValueError, match="kind"):
         make_source("lidar")
+
+
+def test_forward_flight_while_turning_keeps_the_rectified_zoom_bounded(texture):
+    """A tilted camera flying forward and turning: alpha=0 rectification zoomed this pair 46x
+    (disparities far beyond the search range, no points); the zoom is capped at 1.5x."""
+    k = CameraIntrinsics.from_fov(320, 240, 90.0)
+    ref = plane_frame(camera_pose(np.array([0.0, 0.0, ALT]), np.radians(90.0), 60.0), k, texture, 150.0, stamp=2.0)
+    other = plane_frame(camera_pose(np.array([-0.3, -3.5, ALT]), np.radians(94.0), 60.0), k, texture, 150.0,
+                        stamp=1.0)
+    cloud, disp = StereoMatcher(MatchConfig(num_disparities=48, block_size=3)).cloud(ref, other)
+    assert disp.pair.f == pytest.approx(1.5 * k.fx)
+    s = score(cloud, ref)
+    assert s.precision > 0.9 and s.coverage > 0.1 and s.median_rel_error < 0.02, s

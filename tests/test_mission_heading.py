@@ -73,14 +73,16 @@ def test_a_steady_heading_keeps_consecutive_frames_paired_where_facing_the_targe
     assert result["target"][1] >= 7 and result["target"][0] <= 8  # every hop but the first starts turned
 
 
-def test_looking_sideways_maps_a_diagonal_hop_that_a_fixed_heading_pairs_but_cannot_match(renderer) -> None:
-    """A hop 45 deg off a fixed north heading: the frames pair, but the matcher finds no points; looking
-    sideways to the same hop, every pair gives a cloud (why the shipped MCDM presets use ``side``)."""
+def test_looking_sideways_maps_more_of_a_diagonal_hop_than_a_fixed_heading(renderer) -> None:
+    """A hop 45 deg off a fixed north heading: the frames pair, but rectification turns the views far
+    and keeps a smaller common area (it found no points at all before the zoom cap of depth.rectify);
+    looking sideways to the same hop, every pair gives a third more points (why the shipped MCDM
+    presets use ``side``)."""
     points = {}
     for rule in ("fixed", "side"):
         source = StereoDepth(preset_for(320), scene_depth=terrain_scene_depth(renderer.world))
         clouds = [source.push(f) for f in _fly(renderer, _policy(rule, 90.0), [(1.0, 1.0)], 4)]
         assert source.stats()["pairs"] == 3, rule
         points[rule] = [0 if c is None else len(c) for c in clouds[1:]]
-    assert max(points["fixed"]) == 0
-    assert min(points["side"]) > 20_000
+    assert min(points["fixed"]) > 20_000  # measured 40.7-41.4 k points
+    assert min(points["side"]) > 1.3 * max(points["fixed"])  # measured 56.7-57.0 k

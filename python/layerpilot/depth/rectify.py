@@ -19,6 +19,15 @@ import numpy as np
 from layerpilot.geometry import CameraFrame
 
 
+# alpha=0 keeps only pixels valid in both views. When rectification turns the views far (a
+# baseline with a large part along the optical axis, as in forward flight with a tilted camera)
+# that area is small and the crop zoomed in up to 9x: the disparities left the search range that
+# the picker's baseline window assumes, and a third of the demo's pairs gave no points
+# (docs/depth.md). Beyond MAX_ZOOM the focal length is scaled back about the image centre and the
+# rectified border that falls outside a view is masked like any other invalid pixel.
+MAX_ZOOM = 1.5
+
+
 @dataclass(frozen=True)
 class RectifiedPair:
     left: np.ndarray  # uint8 grey, canonical reference image
@@ -56,6 +65,9 @@ def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> Rectifi
         raise ValueError("other: same camera centre as ref, no baseline")
     R1, R2, P1, P2, _, _, _ = cv2.stereoRectify(K_r, None, K_o, None, size, R, T.reshape(3, 1),
                                                 flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+    zoom = P1[0, 0] / K_r[0, 0]
+    if zoom > MAX_ZOOM:
+        P1, P2 = (_zoomed(P, MAX_ZOOM / zoom, size) for P in (P1, P2))
     vertical = abs(P2[1, 3]) > abs(P2[0, 3])
     axis = 1 if vertical else 0
     other_pos = -P2[axis, 3] / P2[axis, axis]  # partner centre along the rectified baseline axis
@@ -85,6 +97,12 @@ def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> Rectifi
     source_xy = (np.dstack([lx, ly]) + 0.5) / scale - 0.5
     return RectifiedPair(left, right, _inside(lx, ly, w, h), _inside(rx, ry, w, h), f, cx, cy,
                          float(abs(other_pos)), to_camera, source_xy.astype(np.float32), vertical, mirrored)
+
+
+def _zoomed(P: np.ndarray, s: float, size: tuple[int, int]) -> np.ndarray:
+    """Projection matrix ``P`` with its focal length scaled by ``s`` about the image centre."""
+    cx, cy = (size[0] - 1) / 2, (size[1] - 1) / 2
+    return np.array([[s, 0.0, (1 - s) * cx], [0.0, s, (1 - s) * cy], [0.0, 0.0, 1.0]]) @ P
 
 
 def _inside(mx: np.ndarray, my: np.ndarray, w: int, h: int) -> np.ndarray:
