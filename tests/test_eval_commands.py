@@ -42,6 +42,7 @@ def test_study_quick_report_has_every_section_and_plausible_values(tmp_path) -> 
     assert set(behaviors) == {"balanced", "orbit"}
     for name, entry in behaviors.items():
         series = MetricSeries.read_csv(Path(entry["runs"][0]) / "metrics.csv")
+        assert (Path(entry["runs"][0]) / "mission.rrd").stat().st_size > 0, name  # every study run's recording
         mapped = series.column("percent_mapped")
         assert np.all((mapped >= 0) & (mapped <= 100)) and np.all(np.diff(mapped) >= 0) and mapped[-1] > 0, name
         final = entry["final"][0]

@@ -43,7 +43,7 @@ def test_a_study_over_world_seeds_reports_time_to_coverage_and_paired_ratio_from
     small = tmp_path / "small-view.toml"
     small.write_text(preset.replace("radius = 100.0", "radius = 40.0"))
     done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "study", "--quick", "--duration", "20",
-                           "--behaviors", str(small), "--world-seeds", "3", "--out", str(tmp_path)],
+                           "--behaviors", str(small), "--world-seeds", "3", "--no-rrd", "--out", str(tmp_path)],
                           capture_output=True, text=True, cwd=ROOT, timeout=600,
                           env={"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"})
     assert done.returncode == 0, done.stderr[-2000:]
@@ -52,6 +52,7 @@ def test_a_study_over_world_seeds_reports_time_to_coverage_and_paired_ratio_from
     entry = study["behaviors"][str(small)]
     run = Path(entry["runs"][0])
     assert run.name == "small-view-w3-s0" and study["settings"]["sim.world.seed"] == "3"
+    assert (run / "metrics.csv").exists() and not (run / "mission.rrd").exists()  # --no-rrd
     settings = json.loads((run / "metrics.json").read_text())["settings"]
     assert settings["sim.world.seed"] == 3
     rows = list(zip(*[np.genfromtxt(run / "metrics.csv", delimiter=",", names=True)[k] for k in ("t", "percent_mapped")]))

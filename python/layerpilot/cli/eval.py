@@ -73,6 +73,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     study.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="missions in parallel")
     study.add_argument("--name", default="study", help="run directory name")
     study.add_argument("--quick", action="store_true", help="short version for CI: 60 s, 1 seed, 160x120 camera")
+    study.add_argument("--no-rrd", action="store_true", help="do not save each run's Rerun recording (mission.rrd)")
     _mission_options(study)
     study.set_defaults(func=_study)
 
@@ -131,10 +132,10 @@ def _run(mission, run_dir: str | Path, progress_stream=None, *, rrd: bool = True
             view.close()
 
 
-def _one(mission, run_dir: str) -> tuple[str, dict[str, float], float]:
+def _one(mission, run_dir: str, rrd: bool) -> tuple[str, dict[str, float], float]:
     """A study mission in a worker process (its progress bar silenced; the parent reports)."""
     with open(os.devnull, "w") as quiet:
-        result = _run(mission, run_dir, progress_stream=quiet)
+        result = _run(mission, run_dir, progress_stream=quiet, rrd=rrd)
     return run_dir, result.final, result.wall_s
 
 
@@ -174,7 +175,7 @@ def _study(args: argparse.Namespace) -> None:
     progress.update(0)
     context = multiprocessing.get_context("spawn")  # fresh GL context and sockets per worker
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-        futures = {pool.submit(_one, m, run_dir): behavior for behavior, m, run_dir in jobs}
+        futures = {pool.submit(_one, m, run_dir, not args.no_rrd): behavior for behavior, m, run_dir in jobs}
         for done, future in enumerate(as_completed(futures), start=1):
             run_dir, final, wall = future.result()
             runs[futures[future]].append(run_dir)
