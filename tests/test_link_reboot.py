@@ -165,8 +165,11 @@ def test_readiness_and_the_end_action_wait_end_on_a_reboot(vehicle, link):
         mav.MAV_CMD_NAV_RETURN_TO_LAUNCH else ack(msg)
     ok, text = link.end_mission("rtl", 10.0)
     assert not ok and text.startswith("RTL ") and "autopilot rebooted" in text, text
-    wait_for(lambda: vehicle.uptime > 3.0, "the new boot to be under way")
-    threading.Timer(0.3, vehicle.reboot).start()  # and again while the link waits for readiness
+    # and again while the link waits for readiness: a rebooted ArduCopter streams nothing, so the link sees
+    # the uptime go back only at its next ask (every READY_STREAMS_S, 2 s = 20 mission s at 10x): the old
+    # boot must be older than that
+    wait_for(lambda: vehicle.uptime > 30.0, "the new boot to be under way", timeout=30)
+    threading.Timer(0.3, vehicle.reboot).start()
     with pytest.raises(ControlLost, match="^waiting for the autopilot to be ready: autopilot rebooted"):
         link.wait_ready(timeout=30.0)
 

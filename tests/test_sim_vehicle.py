@@ -14,7 +14,7 @@ from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
 from layerpilot.link.mission_transfer import GLOBAL, MissionItem
 from layerpilot.link.relay import free_port
-from layerpilot.sim.mavlink_vehicle import SITL_DATUM, EndpointConfig, MavlinkVehicle
+from layerpilot.sim.mavlink_vehicle import DEFAULT_INTERVALS, SITL_DATUM, EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter, VehicleLimits
 
 DT = 0.02
@@ -99,12 +99,20 @@ def test_deterministic_and_motors_off_stays_on_ground():
 class Bench:
     """Endpoint stepped by the test, with a pymavlink client on its TCP port."""
 
-    def __init__(self, config: EndpointConfig | None = None, position=(0.0, 0.0, 0.0)) -> None:
+    def __init__(self, config: EndpointConfig | None = None, position=(0.0, 0.0, 0.0), streams: bool = True) -> None:
         self.endpoint = MavlinkVehicle(Multicopter(position=position, ground_z=position[2]), "tcp:127.0.0.1:0",
                                        config)
         port = self.endpoint.addresses[0][1]
         self.client = open_connection(f"tcp:127.0.0.1:{port}", 255, 190)
         self.received: list = []
+        if streams:
+            self.ask_streams()
+
+    def ask_streams(self) -> None:
+        """What a GCS does first: ask for every stream at its usual rate (ArduCopter sends none unasked)."""
+        for msg_id, interval in DEFAULT_INTERVALS.items():
+            self.client.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, interval * 1e6,
+                                              0, 0, 0, 0, 0)
 
     def run(self, seconds: float) -> list:
         got = []
@@ -178,6 +186,27 @@ def test_telemetry_and_readiness(bench):
     assert sum(m.get_type() == "LOCAL_POSITION_NED" for m in got) in (49, 50, 51)
     assert sum(m.get_type() == "ATTITUDE" for m in got) == 0
     assert bench.command(42424) == mav.MAV_RESULT_UNSUPPORTED
+
+
+def test_arducopter_streams_only_what_was_asked_and_a_reboot_forgets_it():
+    """Like ArduCopter (SRx_ rates 0): HEARTBEAT alone until a stream is asked for, REQUEST_DATA_STREAM
+    groups at the asked rate, and after a reboot HEARTBEAT alone again. PX4 streams unasked."""
+    b = Bench(streams=False)
+    try:
+        assert {m.get_type() for m in b.run(1.5)} == {"HEARTBEAT"}
+        b.client.mav.request_data_stream_send(1, 1, mav.MAV_DATA_STREAM_POSITION, 5, 1)
+        got = [m.get_type() for m in b.run(2.0)]
+        assert set(got) == {"HEARTBEAT", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"}
+        assert got.count("LOCAL_POSITION_NED") in (9, 10, 11)
+        b.endpoint.reboot()
+        assert {m.get_type() for m in b.run(2.0)} == {"HEARTBEAT"}
+    finally:
+        b.close()
+    px4 = Bench(EndpointConfig(flavour="px4"), streams=False)
+    try:
+        assert {"SYS_STATUS", "ATTITUDE", "GPS_RAW_INT", "LOCAL_POSITION_NED"} <= {m.get_type() for m in px4.run(1.5)}
+    finally:
+        px4.close()
 
 
 def test_arducopter_refusals_and_auto_disarm(bench):

@@ -25,7 +25,10 @@ Failsafes:
     ``autopilot failsafe: battery ...`` and kept in ``failsafe``, never as a takeover;
   * a reboot of the autopilot (its uptime, time_boot_ms, going backwards) is reported as
     such, never as a takeover: the link lets go of the vehicle (``reboots`` counts them);
-    a disarm while the link flies is reported after ``REBOOT_GRACE_S`` unless it was a reboot.
+    a disarm while the link flies makes the link ask for the streams and the uptime again
+    (a rebooted ArduCopter forgot the message intervals asked of it) and is judged when the next
+    uptime reading arrives: a reboot if it went back, else a disarm (also after ``UPTIME_WAIT_S``
+    without one).
 :meth:`FlightLink.fly_mission` hands the vehicle to its stored mission (ArduPilot AUTO) and
 follows MISSION_CURRENT and MISSION_ITEM_REACHED; AUTO is then the mode the link flies in,
 so another mode is a takeover as above.
@@ -63,12 +66,13 @@ POSITION_AND_YAW = 0b100111111000   # as above plus yaw
 POSITION_FRESH_S = 2.0              # a position estimate older than this does not count
 WAKE_S = 0.2                        # longest single sleep of a wait (see _wait)
 RECONNECT_PERIOD_S = 1.0            # while lost, a stream connection (TCP, serial) is reopened this often
+READY_STREAMS_S = 2.0               # while waiting for readiness, ask for the streams and the uptime again this often
 READY_REPORT_S = 15.0               # while waiting for readiness, say what is still missing this often
 END_ACTIONS = {"rtl": "RTL", "land": "LAND", "loiter": "LOITER"}  # mission end action -> the mode it puts
 # ArduPilot's EKF_STATUS_REPORT flags: a horizontal position (absolute or relative) and not uninitialised
 EKF_POSITION = mav.EKF_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_REL
 REBOOT_BACKSTEP_S = 1.0  # the autopilot's uptime went back by more than this: it rebooted
-REBOOT_GRACE_S = 0.3     # a disarm waits this long for the reboot that may explain it (same burst)
+UPTIME_WAIT_S = 2.0      # a disarm waits at most this long for the uptime reading that tells a reboot
 FAILSAFE_TEXT_S = 5.0    # a mode change this soon after a low-battery STATUSTEXT is the autopilot's failsafe
 LOW_BATTERY_TEXT = re.compile(r"batt\w*\b.*\b(low|critical|failsafe|emergency)|(low|critical|emergency)\b.*batt",
                               re.IGNORECASE)  # ArduPilot's and PX4's low-battery warnings
@@ -177,7 +181,8 @@ class FlightLink:
         self.reboots = 0
         self.uptimes_before_reboot: list[float] = []  # the autopilot's uptime (s) when each reboot cut it
         self._uptime = -math.inf    # the autopilot's newest time_boot_ms (s): a step back is a reboot
-        self._disarmed_at: float | None = None  # an unexplained disarm, reported after REBOOT_GRACE_S
+        self._disarmed_at: float | None = None  # an unexplained disarm, judged by the next uptime reading
+        self._uptime_at = -math.inf  # when (monotonic) the newest uptime reading arrived
         self._rebooted = False      # the worker re-requests the streams a reboot forgot
         self._thread = threading.Thread(target=self._loop, name="flight-link", daemon=True)
         self._thread.start()
@@ -272,6 +277,7 @@ class FlightLink:
         start = time.monotonic()
         deadline = start + timeout
         next_home_request = 0.0
+        next_streams = start + READY_STREAMS_S
         next_report = start + READY_REPORT_S
         upsets = len(self.upsets)
         while self.missing():
@@ -290,6 +296,9 @@ class FlightLink:
             if self._home is None and self._link_ok and time.monotonic() >= next_home_request:
                 self._command_long(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
                 next_home_request = time.monotonic() + 1.0
+            if self._link_ok and time.monotonic() >= next_streams:  # a reboot meanwhile forgot them (or one was lost)
+                self._ask_uptime()
+                next_streams = time.monotonic() + READY_STREAMS_S
             self._wait(lambda: False, 0.1)
 
     # --- flying ----------------------------------------------------------------------
@@ -595,13 +604,23 @@ class FlightLink:
         self._transmit(lambda m: m.command_long_send(self.target_system, self.target_component, command,
                                                       confirmation, *p))
 
+    def _ask_uptime(self) -> None:
+        """Ask for the streams and for SYSTEM_TIME at once: after a link loss or an unexpected disarm
+        the uptime tells whether the autopilot rebooted, and a rebooted one streams nothing unasked."""
+        self._request_streams()
+        self._command_long(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_SYSTEM_TIME)
+
     def _request_streams(self) -> None:
-        """Ask for the streams the link needs (ACKs checked by the worker: refusals are reported)."""
+        """Ask for the streams the link needs (ACKs checked by the worker: refusals are reported); real
+        ArduCopter streams none unasked, so GPS and EKF readiness rest on GPS_RAW_INT and EKF_STATUS_REPORT
+        asked for here (EKF_STATUS_REPORT is ArduPilot's alone)."""
         fast = 1e6 / self.config.telemetry_rate_hz
         for msg_id, interval in ((mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, fast), (mav.MAVLINK_MSG_ID_ATTITUDE, fast),
                                  (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, fast), (mav.MAVLINK_MSG_ID_SYS_STATUS, 1e6),
-                                 (mav.MAVLINK_MSG_ID_HOME_POSITION, 5e6)):
-            self._command_long(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval)
+                                 (mav.MAVLINK_MSG_ID_HOME_POSITION, 5e6), (mav.MAVLINK_MSG_ID_GPS_RAW_INT, 1e6),
+                                 (mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1e6), (mav.MAVLINK_MSG_ID_SYSTEM_TIME, 1e6)):
+            if msg_id != mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT or self.flavour == modes.ARDUPILOT:
+                self._command_long(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval)
 
     # --- internals: waypoints --------------------------------------------------------
     def _home_or_error(self) -> np.ndarray:
@@ -784,9 +803,11 @@ class FlightLink:
                          "no new waypoints until it returns")
 
     def _check_disarm(self, now: float) -> None:
-        """A disarm while the link flies, reported once no reboot explained it within REBOOT_GRACE_S."""
+        """A disarm while the link flies, reported once an uptime reading since did not go back (no
+        reboot), or after UPTIME_WAIT_S without one."""
         with self._cond:
-            if self._disarmed_at is None or now - self._disarmed_at < REBOOT_GRACE_S:
+            if self._disarmed_at is None or (self._uptime_at <= self._disarmed_at
+                                             and now - self._disarmed_at < UPTIME_WAIT_S):
                 return
             self._disarmed_at = None
             text = f"the vehicle disarmed while the link was flying it (mode {self._mode}); waypoint abandoned"
@@ -826,7 +847,7 @@ class FlightLink:
                 uptime = msg.time_boot_ms / 1000.0
                 if uptime < self._uptime - REBOOT_BACKSTEP_S:
                     rebooted = self._on_reboot(uptime)
-                self._uptime = uptime
+                self._uptime, self._uptime_at = uptime, time.monotonic()
             if kind == "LOCAL_POSITION_NED":
                 self._position = np.array(ned_to_enu(msg.x, msg.y, msg.z))
                 self._velocity = np.array(ned_to_enu(msg.vx, msg.vy, msg.vz))
@@ -892,8 +913,9 @@ class FlightLink:
             guided = modes.MISSION_MODE[self.flavour] if self._auto else modes.GUIDED_MODE[self.flavour]
             if restored and self._lost_at:
                 reports += self._on_restored()
-            if was_armed and not self._armed and self._in_control:
-                self._disarmed_at = time.monotonic()  # a reboot, or a disarm: _check_disarm tells after a grace
+            disarmed = was_armed and not self._armed  # or rebooted: ask the uptime (nothing streams unasked)
+            if disarmed and self._in_control:
+                self._disarmed_at = time.monotonic()  # a reboot, or a disarm: the next uptime tells (_check_disarm)
             elif self._in_control and not self._paused and self._mode != guided and old == guided:
                 if not (restored and self.flavour == modes.PX4 and self._mode == modes.HOLD_MODE[modes.PX4]):
                     self._paused = True
@@ -912,6 +934,8 @@ class FlightLink:
             self._report(text)
         if restored and self._lost_at:
             self._after_restore()
+        elif disarmed:
+            self._ask_uptime()
 
     def _battery_failsafe(self) -> str:
         """What the autopilot's battery failsafe said, if the mode change just seen is one (else "")."""
@@ -934,8 +958,9 @@ class FlightLink:
         return [f"link restored after {lost_for:.1f} s; resuming"]
 
     def _after_restore(self) -> None:
-        """Worker side of a restored link: long-loss action, PX4 re-entry into OFFBOARD, streams again."""
-        self._request_streams()
+        """Worker side of a restored link: streams and uptime again, long-loss action, PX4 re-entry
+        into OFFBOARD."""
+        self._ask_uptime()
         if self._long_loss_command is not None:
             self._command_long(self._long_loss_command)
         elif self.flavour == modes.PX4 and self._in_control and self._mode == modes.HOLD_MODE[modes.PX4]:

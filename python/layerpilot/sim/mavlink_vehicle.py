@@ -60,7 +60,9 @@ YAW_RATE_IGNORE = 2048
 GUIDED_VELOCITY_TIMEOUT_S = 3.0  # ArduCopter stops a velocity-only guided command after 3 s
 LOOK_AT_MIN_DISTANCE_M = 2.0  # ArduCopter turns toward a guided destination only while farther than this
 
-# Default telemetry intervals (mission seconds), roughly ArduPilot's SRx_ defaults for a GCS link.
+# Telemetry intervals (mission seconds): what PX4 streams unasked, and the rates of the ArduPilot
+# flavour's SRx_ streams for a GCS link - which, like ArduCopter's (SRx_ defaults 0), it sends only
+# once asked (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM); unasked it sends HEARTBEAT alone.
 DEFAULT_INTERVALS = {
     mav.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
     mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
@@ -74,6 +76,15 @@ DEFAULT_INTERVALS = {
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,      # ArduPilot's EXTRA3 stream
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,         # uptime (time_boot_ms); no GPS clock (0)
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,     # ArduPilot's EXTENDED_STATUS stream (and at once on a new item)
+}
+# ArduPilot's REQUEST_DATA_STREAM groups (its SRx_ parameters) of the messages above
+DATA_STREAMS = {
+    mav.MAV_DATA_STREAM_EXTENDED_STATUS: (mav.MAVLINK_MSG_ID_SYS_STATUS, mav.MAVLINK_MSG_ID_GPS_RAW_INT,
+                                          mav.MAVLINK_MSG_ID_MISSION_CURRENT),
+    mav.MAV_DATA_STREAM_POSITION: (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
+    mav.MAV_DATA_STREAM_EXTRA1: (mav.MAVLINK_MSG_ID_ATTITUDE,),
+    mav.MAV_DATA_STREAM_EXTRA3: (mav.MAVLINK_MSG_ID_SYSTEM_TIME, mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
+                                 mav.MAVLINK_MSG_ID_BATTERY_STATUS),
 }
 
 # EKF_STATUS_REPORT flags, after ArduCopter's estimator: without GPS attitude, vertical velocity
@@ -174,7 +185,7 @@ class MavlinkVehicle:
         self.armed = False
         self.flavour = self.config.flavour
         self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
-        self._intervals = dict(DEFAULT_INTERVALS)
+        self._intervals = self._default_intervals()
         self._next_send = {msg_id: 0.0 for msg_id in self._intervals}
         self.battery = Battery(self.config.battery)
         self.boots = 1
@@ -215,7 +226,8 @@ class MavlinkVehicle:
     def reboot(self) -> None:
         """Restart the autopilot as a power cycle does: a new boot (time_boot_ms from 0, pre-arm checks and
         GPS fix again after ``prearm_delay_s``), disarmed on the ground at home in its first mode, message
-        intervals back to their defaults. The sockets stay served (a radio or serial link sees the new
+        intervals back to their defaults (the ArduPilot flavour forgets every stream asked of it, as
+        ArduCopter does). The sockets stay served (a radio or serial link sees the new
         boot; SITL's TCP clients would reconnect); the battery keeps its charge."""
         with self._lock:
             self.boots += 1
@@ -229,7 +241,7 @@ class MavlinkVehicle:
             self._velocity_deadline, self._setpoint_times = None, []
             self._auto = None  # a mission flown after the boot starts again at item 1
             self._battery_failsafe = False
-            self._intervals = dict(DEFAULT_INTERVALS)
+            self._intervals = self._default_intervals()
             self._next_send = {msg_id: self.time for msg_id in self._intervals}
 
     @property
@@ -316,6 +328,8 @@ class MavlinkVehicle:
         elif kind == "COMMAND_LONG" and self._for_me(msg):
             result = self._command(msg)
             self._mav.command_ack_send(msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        elif kind == "REQUEST_DATA_STREAM" and self._for_me(msg) and self.flavour == modes.ARDUPILOT:
+            self._request_data_stream(msg.req_stream_id, msg.req_message_rate if msg.start_stop else 0)
         elif kind in MISSION_MESSAGES and self._for_me(msg):
             self.mission.handle(msg)
         elif kind == "SET_MODE" and msg.target_system == self.config.system_id:
@@ -451,17 +465,31 @@ class MavlinkVehicle:
         self.vehicle.set_position_target(z=target_z)
         return mav.MAV_RESULT_ACCEPTED
 
+    def _default_intervals(self) -> dict[int, float]:
+        """PX4 streams its set unasked; ArduCopter only HEARTBEAT until a stream is asked for."""
+        if self.flavour == modes.PX4:
+            return dict(DEFAULT_INTERVALS)
+        return {msg_id: interval if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT else math.inf
+                for msg_id, interval in DEFAULT_INTERVALS.items()}
+
     def _set_interval(self, msg_id: int, interval_us: float) -> int:
         if msg_id not in DEFAULT_INTERVALS:
             return mav.MAV_RESULT_FAILED
         if interval_us < 0:
             self._intervals[msg_id] = math.inf
         elif interval_us == 0:
-            self._intervals[msg_id] = DEFAULT_INTERVALS[msg_id]
+            self._intervals[msg_id] = self._default_intervals()[msg_id]
         else:
             self._intervals[msg_id] = interval_us * 1e-6
         self._next_send[msg_id] = self.time
         return mav.MAV_RESULT_ACCEPTED
+
+    def _request_data_stream(self, stream: int, rate_hz: float) -> None:
+        """ArduPilot's REQUEST_DATA_STREAM: a group (or all, MAV_DATA_STREAM_ALL) at ``rate_hz``, 0 stops it."""
+        groups = DATA_STREAMS.values() if stream == mav.MAV_DATA_STREAM_ALL else [DATA_STREAMS.get(stream, ())]
+        for msg_id in (m for group in groups for m in group):
+            self._intervals[msg_id] = 1.0 / rate_hz if rate_hz > 0 else math.inf
+            self._next_send[msg_id] = self.time
 
     def _send_now(self, msg_id: int) -> int:
         if msg_id not in DEFAULT_INTERVALS:
@@ -639,7 +667,7 @@ class MavlinkVehicle:
 
     def _send_due(self) -> None:
         for msg_id, interval in self._intervals.items():
-            if self.time + 1e-9 >= self._next_send[msg_id] and self._send(msg_id):
+            if math.isfinite(interval) and self.time + 1e-9 >= self._next_send[msg_id] and self._send(msg_id):
                 self._next_send[msg_id] = max(self._next_send[msg_id] + interval, self.time + 0.5 * interval)
 
     def _send(self, msg_id: int) -> bool:
