@@ -244,6 +244,8 @@ def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_report
     autopilot's time_boot_ms."""
     vehicle = start_vehicle(BatteryConfig(capacity_mah=200.0, low_mah=100.0, idle_current_a=0.0))
     gcs = open_connection(url_of(vehicle), 255, 190)
+    gcs.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, mav.MAVLINK_MSG_ID_BATTERY_STATUS, 1e6,
+                              0, 0, 0, 0, 0)  # a ground station asks for it: ArduCopter streams nothing unasked
     stamps: list[tuple[float, float]] = []  # (pose stamp, the vehicle's uptime when it arrived)
     try:
         with flying_link_node(vehicle, MissionClock(500.0), end_action="loiter") as (node, session):
