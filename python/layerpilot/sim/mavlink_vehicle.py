@@ -190,6 +190,7 @@ class MavlinkVehicle:
         self.battery = Battery(self.config.battery)
         self.boots = 1
         self._battery_failsafe = False  # ArduCopter acts on the low-battery failsafe once per boot
+        self._home_announced = False    # HOME_POSITION and GPS_GLOBAL_ORIGIN sent once when set, each boot
         self._boot_at = 0.0  # mission time of the last boot: time_boot_ms counts from here
         self._ground_time = 0.0
         self._airborne = False
@@ -240,7 +241,7 @@ class MavlinkVehicle:
             self.mode = "STABILIZE" if self.flavour == modes.ARDUPILOT else "POSCTL"
             self._velocity_deadline, self._setpoint_times = None, []
             self._auto = None  # a mission flown after the boot starts again at item 1
-            self._battery_failsafe = False
+            self._battery_failsafe, self._home_announced = False, False
             self._intervals = self._default_intervals()
             self._next_send = {msg_id: self.time for msg_id in self._intervals}
 
@@ -666,6 +667,10 @@ class MavlinkVehicle:
         self._mav.statustext_send(severity, text[:50].encode())
 
     def _send_due(self) -> None:
+        if not self._home_announced and self._has_fix():  # as ArduCopter when it sets home and the EKF origin
+            self._home_announced = True
+            self._send(mav.MAVLINK_MSG_ID_HOME_POSITION)
+            self._send(mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
         for msg_id, interval in self._intervals.items():
             if math.isfinite(interval) and self.time + 1e-9 >= self._next_send[msg_id] and self._send(msg_id):
                 self._next_send[msg_id] = max(self._next_send[msg_id] + interval, self.time + 0.5 * interval)
