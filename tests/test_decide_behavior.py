@@ -23,10 +23,24 @@ def test_presets() -> None:
     for name, weights in PRESETS.items():
         b = load_behavior(name)
         assert b.name == name and b.weights == weights
-        assert (b.r_e, b.r_i, b.n, b.noise, b.altitude) == (10.0, 100.0, 0.01, 0.001, 50.0)
+        assert (b.n, b.noise, b.altitude) == (0.01, 0.001, 50.0)
         assert b.area.shape == "circle" and b.area.radius == 100.0
     staged = load_behavior("explore-then-patrol")
     assert staged.schedule[0].after_coverage == 0.85 and staged.schedule[0].weights == {"time": 1.0}
+    for name in [*PRESETS, "explore-then-patrol"]:  # issue 15: stereo-aware flight, footprint hops, retargeting
+        b = load_behavior(name)
+        assert (b.flight.heading, b.flight.speed, b.flight.hops) == ("side", "survey", "footprint") and b.retarget.enabled
+
+
+def test_metres_in_the_file_win_over_footprint_hops() -> None:
+    def hops(**keys: object) -> str:
+        return behavior_from_dict({"weights": {"fringe": 1.0}, **keys}).flight.hops
+
+    assert hops() == "footprint" and hops(flight={"heading": "side"}) == "footprint"
+    assert hops(r_e=12.0) == "fixed" and hops(r_i=80.0) == "fixed" and hops(flight={"hops": "fixed"}) == "fixed"
+    explicit = behavior_from_dict({"weights": {"fringe": 1.0}, "r_e": 12.0, "r_i": 80.0})
+    assert (explicit.r_e, explicit.r_i) == (12.0, 80.0)
+    assert Behavior(weights={"fringe": 1.0}).flight.hops == "fixed"  # built in code: the paper's 10 m / 100 m
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""Opt-in behaviors: retargeting with hysteresis, terrain-aware altitude."""
+"""Behavior options: retargeting with hysteresis (on by default, can be switched off), terrain-aware altitude."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def test_retarget_hysteresis_keeps_the_target_against_small_gains() -> None:
     assert dm.reconsider(gone, (35.0, 0.0), 5.0).waypoint[0] < -30
 
 
-def test_retarget_is_opt_in() -> None:
+def test_retarget_switched_off_never_switches() -> None:
     dm = DecisionMaker(_behavior(False))
     dm.decide(_blobs((40.0, 0.0, 0.5)), (0.0, 0.0), 0.0)
     assert dm.reconsider(_blobs((10.0, 40.0, 1.0)), (10.0, 0.0), 60.0) is None

@@ -34,6 +34,16 @@ def test_hop_radii_follow_the_camera_footprint() -> None:
         footprint_hops(CAMERA, 120.0, 100.0)
 
 
+def test_a_preset_without_metres_hops_with_the_footprint_and_metres_in_a_file_win(tmp_path) -> None:
+    sim = SimConfig(camera=CAMERA, frame_rate_hz=1.0)
+    balanced = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior="balanced"), sim=sim))
+    assert balanced.behavior.r_e == pytest.approx(28.87, abs=0.01) and balanced.behavior.r_i == pytest.approx(202.07, abs=0.02)
+    path = tmp_path / "metres.toml"
+    path.write_text("r_e = 12.0\nr_i = 90.0\n[weights]\nfringe = 1.0\n")
+    metres = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior=str(path)), sim=sim))
+    assert (metres.behavior.r_e, metres.behavior.r_i) == (12.0, 90.0)
+
+
 def test_every_shipped_preset_loads() -> None:
     for name in preset_names():
         assert load_behavior(name).weights, name

@@ -39,9 +39,13 @@ def sessions():
         s.close()
 
 
-def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
+def test_decides_on_arrival_and_avoids_the_other_drone(sessions, tmp_path):
     node_session, world = sessions
-    nodes = [DecideNode(node_session, v, Mission(vehicles=["uav1", "uav2"])) for v in ("uav1", "uav2")]
+    # balanced's weights with the paper's metres: footprint hops (r_e 28.9 m, r_i 202 m) reach past this small map
+    metres = tmp_path / "metres.toml"
+    metres.write_text("r_e = 10.0\nr_i = 100.0\n[weights]\nfringe = 0.3\ntime = 0.3\ndistance = 0.3\n")
+    mission = Mission(vehicles=["uav1", "uav2"], decide=PilotConfig(behavior=str(metres)))
+    nodes = [DecideNode(node_session, v, mission) for v in ("uav1", "uav2")]
     got: dict[str, list[msg.Waypoint]] = {"uav1": [], "uav2": []}
     decisions: list[msg.Decision] = []
     subs = [world.declare_subscriber(Keys(v).waypoint, lambda s, v=v: got[v].append(msg.decode_waypoint(s.payload.to_bytes())))
@@ -64,7 +68,7 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions):
         d1 = decisions[0]
         names = [t.name for t in d1.terms]
         assert {"fringe", "time", "distance", "zone", "preference", "history"} <= set(names)
-        assert d1.score > 0 and d1.behavior == "balanced"
+        assert d1.score > 0 and d1.behavior == str(metres)
         assert_aggregates_of_the_tick(world, nodes[0], w1, d1)
 
         # same map, same place, same behavior: uav2 would pick uav1's cell, but must stay r_e away

@@ -66,12 +66,16 @@ class SchedulePhase:
 
 @dataclass(frozen=True)
 class Retarget:
-    """Opt-in: switch target mid-flight when another cell scores better by ``margin`` (relative)."""
+    """On by default: switch target mid-flight when another cell scores better by ``margin`` (relative).
 
-    enabled: bool = False
-    margin: float = 0.25  # new best must exceed the current target's score by 25%
-    min_interval: float = 5.0  # seconds between switches (hysteresis in time)
-    min_separation: float = 10.0  # metres; a nearer 'better' cell is not worth a switch
+    The defaults fire a few times in a 300 s mission of every shipped MCDM preset (docs/eval.md,
+    "hop defaults"): the margin and interval keep the camera from turning every second.
+    """
+
+    enabled: bool = True
+    margin: float = 0.3  # new best must exceed the current target's score by 30%
+    min_interval: float = 8.0  # seconds between switches (hysteresis in time)
+    min_separation: float = 15.0  # metres; a nearer 'better' cell is not worth a switch
 
     def __post_init__(self) -> None:
         for name in ("margin", "min_interval", "min_separation"):
@@ -108,7 +112,9 @@ class Flight:
     heading, i.e. "hold heading"), ``center`` faces the area's centre as the orbit does.
     ``speed = "survey"`` cruises at the speed that puts consecutive frames one target stereo
     baseline apart (as the lawnmower does); ``"default"`` leaves it to the mission / autopilot.
-    ``hops = "footprint"`` derives r_e and r_i from the camera's ground footprint instead of the file.
+    ``hops = "footprint"`` derives r_e and r_i from the camera's ground footprint instead of the file;
+    a behavior file that sets neither r_e, r_i nor ``hops`` gets ``footprint`` (``behavior_from_dict``),
+    one that sets r_e or r_i keeps its metres.
     """
 
     heading: Literal["target", "side", "fixed", "center"] = "target"
@@ -164,7 +170,13 @@ class Behavior:
 
 
 def behavior_from_dict(data: dict, where: str = "behavior", base: Path | None = None) -> Behavior:
-    """Validate a behavior table; imports its plugins, then checks every weighted layer exists."""
+    """Validate a behavior table; imports its plugins, then checks every weighted layer exists.
+
+    Explicit metres win: a table without r_e, r_i and ``flight.hops`` hops with the footprint.
+    """
+    flight = data.get("flight", {})
+    if "r_e" not in data and "r_i" not in data and isinstance(flight, dict) and "hops" not in flight:
+        data = {**data, "flight": {**flight, "hops": "footprint"}}
     behavior = from_dict(Behavior, data, where)
     try:
         load_plugins(behavior.plugins, base)
