@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from layerpilot.sim.world import World, WorldConfig
 from conftest import SMALL_MISSION_NODES, start_up, stop_up, operator_session
 
 K = Keys("uav1")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_mission_flies_an_outside_autopilot_with_layerpilots_world_as_camera(tmp_path):
@@ -27,6 +29,9 @@ def test_mission_flies_an_outside_autopilot_with_layerpilots_world_as_camera(tmp
     sitl = MavlinkVehicle(Multicopter(), "tcp:127.0.0.1:0",
                           EndpointConfig(flavour="px4", offboard_min_rate_hz=2.0 / 3.0)).start(speed=3.0)
     ep = free_endpoint()
+    # balanced without retargeting: every waypoint is flown to the end, so arrival can be checked
+    behavior = tmp_path / "no-retarget.toml"
+    behavior.write_text((ROOT / "config" / "behaviors" / "balanced.toml").read_text() + "\n[retarget]\nenabled = false\n")
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
 vehicles = ["uav1"]
@@ -36,7 +41,7 @@ resolution = 1.0
 layers_rate = 2.0
 window = [-128.0, -128.0, 256, 256]
 snapshot = ""
-""" + SMALL_MISSION_NODES + f"""
+""" + SMALL_MISSION_NODES.replace('behavior = "balanced"', f'behavior = "{behavior}"') + f"""
 [link.link]
 url = "tcp:127.0.0.1:{sitl.addresses[0][1]}"
 """)
