@@ -27,10 +27,13 @@ DRONE = (150.0, 80.0, 50.0)
 
 @pytest.fixture(scope="module")
 def survey_behavior(tmp_path_factory) -> str:
-    """The balanced behavior over a circle of 500 m: a square-kilometre area of interest."""
+    """The balanced behavior over a circle of 500 m: a square-kilometre area of interest.
+
+    With the paper's hops in metres (r_i 100 m), so the window's size below is known.
+    """
     path = tmp_path_factory.mktemp("behavior") / "km.toml"
-    path.write_text('weights = { fringe = 0.3, time = 0.3, distance = 0.3 }\n[area]\nshape = "circle"\n'
-                    "radius = 500.0\n")
+    path.write_text('r_e = 10.0\nr_i = 100.0\nweights = { fringe = 0.3, time = 0.3, distance = 0.3 }\n'
+                    '[area]\nshape = "circle"\nradius = 500.0\n')
     return str(path)
 
 
