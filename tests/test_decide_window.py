@@ -118,8 +118,9 @@ def test_incremental_fringe_equals_a_fresh_transform(seed: int, holes: float, cl
         r, c, k = int(rng.integers(0, 100)), int(rng.integers(0, width)), int(rng.integers(1, 30))
         observed[r:r + k, c:c + k] = rng.random(observed[r:r + k, c:c + k].shape) > (0.9 if step % 2 else holes)
         want = _fresh_fringe(observed, closing)
-        np.testing.assert_allclose(fringe(observed, closing, window), want[window.slices], rtol=2e-7)
-        np.testing.assert_allclose(fringe(observed, closing), want, rtol=2e-7)
+        # within 2 float32 ulps: OpenCV's rounding depends on the image size (rtol 2e-7 failed near 2^-7)
+        np.testing.assert_array_max_ulp(fringe(observed, closing, window), want[window.slices], maxulp=2)
+        np.testing.assert_array_max_ulp(fringe(observed, closing), want, maxulp=2)
 
 
 def test_lazy_path_history_equals_adding_n_every_tick() -> None:
