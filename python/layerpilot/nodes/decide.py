@@ -35,7 +35,7 @@ from layerpilot.bus.session import publish
 from layerpilot.decide.maker import TickTerms
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
-from layerpilot.mission.build import build_pilot
+from layerpilot.mission.build import build_pilot, geofence_for
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.config import Mission
 from layerpilot.mission.pilot import Command
@@ -44,6 +44,11 @@ from layerpilot.nodes.supervise import Supervisor
 _log = logging.getLogger("layerpilot.decide")
 REPEAT_PERIOD = 1.0  # s: the current waypoint is re-sent this often until reached
 INPUT_ERRORS = (ValueError, ArithmeticError)  # what a layer set or pose can provoke in the pilot: that input's fault
+# A pose the drone cannot have: a stamp off the mission clock, or a place far outside the geofence.
+# One such pose would poison the pilot's clock or path (its arrival, retarget and schedule times).
+MAX_STAMP_S = 1e7  # s of mission clock (115 days)
+POSE_SLACK_M = 500.0  # m outside the geofence's area
+POSE_Z_RANGE = (-1000.0, 10_000.0)  # m, map frame
 AGGREGATES = ("A0", "A1", "A2", "A3")
 
 
@@ -86,6 +91,7 @@ class DecideNode:
         node's predecessor, before it crashed) is continued as the same flight (``continued``), with or
         without ``resume``."""
         self.session, self.keys, self.mission = session, keys.Keys(vehicle), mission
+        self._fence = geofence_for(mission)
         self.pilot = build_pilot(mission)
         self.mission_id = mission_id
         self.state_path = survey.state_file(mission.decide.state, vehicle) if mission.decide.state else None
@@ -173,6 +179,14 @@ class DecideNode:
             self._cond.notify()
 
     def _on_state(self, state: State, key: str) -> None:
+        x, y, z = (float(v) for v in state.position[:3])
+        if not 0.0 <= state.stamp <= MAX_STAMP_S:
+            raise BadMessage("implausible pose", f"stamp {state.stamp} s on {key} is off the mission clock "
+                                                 f"[0, {MAX_STAMP_S:g}]")
+        outside = self._fence.distance_outside(x, y)
+        if outside > POSE_SLACK_M or not POSE_Z_RANGE[0] <= z <= POSE_Z_RANGE[1]:
+            raise BadMessage("implausible pose", f"position ({x:g}, {y:g}, {z:g}) on {key} is {outside:.0f} m "
+                                                 f"outside the geofence or out of {POSE_Z_RANGE} m in height")
         with self._cond:
             if self._state is not None:
                 self.distance_flown += float(np.linalg.norm(state.position - self._state.position))
