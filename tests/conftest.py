@@ -15,7 +15,8 @@ from typing import Iterator
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+ROOT_DIR = Path(__file__).resolve().parents[1]
+SHARED = ROOT_DIR.parent / "shared"
 OCTOMAP_DATA = SHARED / "data" / "octomap"
 
 
@@ -108,3 +109,11 @@ frame_rate_hz = 2.0
 width = 160
 height = 120
 """
+
+
+def balanced_behavior(folder: Path, name: str, head: str = "", tail: str = "") -> str:
+    """The shipped balanced preset with top-level keys before it (e.g. the paper's hops in metres) and
+    tables after it (e.g. retargeting off), written to ``folder / name``: a live test's fixed variant."""
+    path = folder / name
+    path.write_text(head + (ROOT_DIR / "config" / "behaviors" / "balanced.toml").read_text() + tail)
+    return str(path)

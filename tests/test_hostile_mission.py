@@ -24,11 +24,10 @@ from layerpilot.bus.security import open_node_session
 from layerpilot.bus.session import BusConfig, free_endpoint
 from layerpilot.geometry import PointCloud, Pose
 from layerpilot.grid import GridGeometry
-from conftest import free_tcp_port, operator_session, start_up, stop_up
+from conftest import balanced_behavior, free_tcp_port, operator_session, start_up, stop_up
 from test_bus_fuzz import GOOD, mutations
 
 K = Keys("uav1")
-ROOT = Path(__file__).resolve().parents[1]
 BLOCK = zenoh.CongestionControl.BLOCK
 MEMORY_BOUND_MB = 300  # per node: the largest valid messages (1 M-point clouds, 12.6 MP frames) in full queues
 rng = np.random.default_rng(5)
@@ -117,8 +116,7 @@ def answered(session, selector: str) -> bool:
 def test_live_mission_survives_a_hostile_bus(tmp_path):
     ep = free_endpoint()
     # balanced with the paper's 10 m / 100 m hops: short hops keep new waypoints coming on a loaded machine
-    behavior = tmp_path / "balanced-paper-hops.toml"
-    behavior.write_text("r_e = 10.0\nr_i = 100.0\n" + (ROOT / "config" / "behaviors" / "balanced.toml").read_text())
+    behavior = balanced_behavior(tmp_path, "balanced-paper-hops.toml", head="r_e = 10.0\nr_i = 100.0\n")
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
 speed = 2.0

@@ -87,6 +87,18 @@ def settings(video, calibration, **changes) -> CameraSettings:
                           offset=OFFSET, max_gap=0.5, file_start=FILE_START, **changes)
 
 
+
+def wait_for_frames(got: list, node) -> None:
+    """Camera frames are a lossy topic (Zenoh may drop under load): wait until every published frame
+    arrived or what arrives stops growing."""
+    seen = [-1]
+
+    def settled() -> bool:
+        settled_now, seen[0] = len(got) == seen[0], len(got)
+        return settled_now or len(got) == node.published
+
+    wait_for(lambda: time.sleep(0.3) or settled(), "the published frames to arrive")
+
 def test_video_file_frames_get_interpolated_poses_gaps_are_dropped_and_depth_makes_a_cloud(flight):
     video, calibration, rendered = flight
     ep = free_endpoint()
@@ -100,14 +112,7 @@ def test_video_file_frames_get_interpolated_poses_gaps_are_dropped_and_depth_mak
         send_poses(test_session, k.pose)
         wait_for(lambda: len(node.track) == len(POSE_TIMES), "the recorded poses to arrive")
         node.run(threading.Event())  # returns at the file's end
-        # camera frames are a lossy topic (Zenoh may drop under load): wait until what arrives stops growing
-        seen = [-1]
-
-        def settled() -> bool:
-            settled_now, seen[0] = len(got) == seen[0], len(got)
-            return settled_now or len(got) == node.published
-
-        wait_for(lambda: time.sleep(0.3) or settled(), "the published frames to arrive")
+        wait_for_frames(got, node)
     finally:
         sub.undeclare()
         node.stop()
@@ -234,14 +239,7 @@ def test_a_live_stream_is_stamped_on_the_autopilots_clock_and_reopened_when_it_d
             wait_for(lambda: node.published >= 14 and node.reconnects >= 1, "frames from a second connection")
             stop.set()
             runner.join()
-        # camera frames are a lossy topic (Zenoh may drop under load): wait until what arrives stops growing
-        seen = [-1]
-
-        def settled() -> bool:
-            settled_now, seen[0] = len(got) == seen[0], len(got)
-            return settled_now or len(got) == node.published
-
-        wait_for(lambda: time.sleep(0.3) or settled(), "the published frames to arrive")
+        wait_for_frames(got, node)
     finally:
         poses_done.set()
         if pose_thread.is_alive():

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -16,10 +15,9 @@ from layerpilot.bus.session import free_endpoint
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.world import World, WorldConfig
-from conftest import SMALL_MISSION_NODES, start_up, stop_up, operator_session
+from conftest import SMALL_MISSION_NODES, balanced_behavior, start_up, stop_up, operator_session
 
 K = Keys("uav1")
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_mission_flies_an_outside_autopilot_with_layerpilots_world_as_camera(tmp_path):
@@ -30,8 +28,7 @@ def test_mission_flies_an_outside_autopilot_with_layerpilots_world_as_camera(tmp
                           EndpointConfig(flavour="px4", offboard_min_rate_hz=2.0 / 3.0)).start(speed=3.0)
     ep = free_endpoint()
     # balanced without retargeting: every waypoint is flown to the end, so arrival can be checked
-    behavior = tmp_path / "no-retarget.toml"
-    behavior.write_text((ROOT / "config" / "behaviors" / "balanced.toml").read_text() + "\n[retarget]\nenabled = false\n")
+    behavior = balanced_behavior(tmp_path, "no-retarget.toml", tail="\n[retarget]\nenabled = false\n")
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
 vehicles = ["uav1"]

@@ -7,7 +7,6 @@ import os
 import subprocess
 import sys
 from collections import Counter
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -18,8 +17,8 @@ from layerpilot.decide import area_geometry
 from layerpilot.mission.config import Override, load_mission
 from layerpilot.mission.pilot import load_pilot_behavior
 from layerpilot.viz.scene import aggregate_colors
+from conftest import balanced_behavior
 
-ROOT = Path(__file__).resolve().parents[1]
 ENTITIES = ["/world/map", "/world/drone", "/world/path", "/world/camera", "/world/target", "/world/runner_up",
             "/world/area", "/decision", "/layers/color", "/layers/elevation", "/layers/time_since_seen",
             "/layers/distance", "/metrics/percent_mapped", "/metrics/avg_time_since_observed",
@@ -29,9 +28,8 @@ ENTITIES = ["/world/map", "/world/drone", "/world/path", "/world/camera", "/worl
 def test_demo_run_saves_an_rrd_with_the_mission_entities(tmp_path):
     """The demo command's own path (cli.eval._run): run_mission with a LockstepView saving beside the report."""
     # balanced with the paper's r_i of 100 m, so that a tick's window is smaller than the 240 m grid
-    behavior = tmp_path / "balanced-100.toml"
-    behavior.write_text("r_e = 10.0\nr_i = 100.0\n" + (ROOT / "config" / "behaviors" / "balanced.toml").read_text())
-    mission = load_mission("default", [Override("--behavior", "decide.behavior", str(behavior)),
+    behavior = balanced_behavior(tmp_path, "balanced-100.toml", head="r_e = 10.0\nr_i = 100.0\n")
+    mission = load_mission("default", [Override("--behavior", "decide.behavior", behavior),
                                        Override("--duration", "evaluation.duration", 8.0),
                                        Override("--camera", "sim.camera", {"width": 160, "height": 120}),
                                        Override("--depth", "depth.source", "ground_truth")])
