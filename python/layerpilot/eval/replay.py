@@ -26,7 +26,7 @@ from layerpilot.bus.recording import RecordingReader
 from layerpilot.bus.reject import BadMessage
 from layerpilot.config import ConfigError, from_dict
 from layerpilot.mission.config import Mission, load_mission
-from layerpilot.mission.map_service import MapService
+from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.progress import Progress
 
 
@@ -67,12 +67,10 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
         raise ValueError(f"--vehicle {vehicle!r}: the mission's vehicles are {mission.vehicles}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    service = MapService(dataclasses.replace(mission.map_server, snapshot=""))
-    pilot = None
+    mission = dataclasses.replace(mission, map_server=dataclasses.replace(mission.map_server, snapshot=""))
     if behavior is not None:
-        from layerpilot.mission.build import build_pilot
-
-        pilot = build_pilot(dataclasses.replace(mission, decide=dataclasses.replace(mission.decide, behavior=behavior)))
+        mission = dataclasses.replace(mission, decide=dataclasses.replace(mission.decide, behavior=behavior))
+    pipeline = MissionPipeline(mission, {"map", "decide"} if behavior is not None else {"map"}, [vehicle])
     period = 1.0 / mission.map_server.layers_rate
     next_tick = 0.0
     rejected, clouds, own_clouds = 0, 0, 0
@@ -83,7 +81,7 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
             if m.topic == "cloud":
                 c = msg.decode_cloud(m.data)
                 if c.vehicle in mission.vehicles:  # as the map server: the mission's vehicles only
-                    service.insert(c.cloud.points, c.cloud.origin, c.cloud.colors, c.cloud.stamp, c.max_range or None)
+                    pipeline.cloud(c.vehicle, c.cloud, c.max_range or None)
                     clouds += 1
                     own_clouds += c.vehicle == vehicle
             elif m.topic == "decision" and m.key.split("/")[1] == vehicle:
@@ -91,9 +89,9 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
             elif m.topic == "pose" and m.key.split("/")[1] == vehicle:
                 state = msg.decode_state(m.data)
                 path.append((state.stamp, *state.position[:2]))
-                if pilot is not None and state.stamp >= next_tick - 1e-9:
+                if behavior is not None and state.stamp >= next_tick - 1e-9:
                     next_tick = state.stamp + period
-                    decisions.append(_choose(pilot, service, mission, vehicle, state))
+                    decisions.append(_choose(pipeline, vehicle, state))
         except (BadMessage, ValueError) as exc:  # a recorded message that does not decode or insert
             rejected += 1
             if rejected == 1:
@@ -102,32 +100,34 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
             progress.update(reader.position / 1e6, f"{clouds} clouds")
     progress.close(f"{clouds} clouds, {len(decisions)} replayed decisions")
     map_path = out / "map.ot"
-    service.map.save(map_path)
+    pipeline.map.map.save(map_path)
     result = ReplayResult(out, map_path, clouds, rejected, reader.damage, dict(reader.unknown_schemas),
                           decisions, flown, np.array(path).reshape(-1, 3))
-    if pilot is not None and not (path and own_clouds):  # nothing to decide on, nothing to draw
+    if behavior is not None and not (path and own_clouds):  # nothing to decide on, nothing to draw
         raise ValueError(f"recording {reader.path}: holds {len(path)} poses and {own_clouds} clouds of vehicle "
                          f"{vehicle!r}: nothing to replay --behavior on (--vehicle: one of {mission.vehicles})")
-    if pilot is not None:
+    if behavior is not None:
         with open(out / "decisions.jsonl", "w") as f:
             for record in decisions:
                 f.write(json.dumps(record, default=lambda v: np.asarray(v).tolist()) + "\n")
         from layerpilot.eval.pictures.replay import plot_replay
 
-        columns = service.columns()
+        columns = pipeline.map.columns()
         result.pictures["comparison"] = plot_replay(columns, result.path[:, 1:], flown, decisions,
                                                     out / "replay.png", f"flown ({mission.decide.behavior}) vs "
                                                     f"replayed ({behavior})")
     return result
 
 
-def _choose(pilot, service: MapService, mission: Mission, vehicle: str, state: msg.State) -> dict:
+def _choose(pipeline: MissionPipeline, vehicle: str, state: msg.State) -> dict:
     """The pilot's choice from the drone's recorded position, on the layer set as the map server sends it."""
-    message = wire.encode_columns(service.columns(), service.last_stamp, vehicle, mission.map_server.layers)
+    pipeline.pose(vehicle, state.stamp, state.pose)
+    view = pipeline.layers(vehicle)
+    message = wire.encode_columns(view.columns, view.stamp, vehicle, pipeline.mission.map_server.layers)
     columns = wire.to_column_layers(wire.decode_layer_set(message))
-    pilot.target = None  # asked afresh at every tick: the drone never flew the replayed choices
+    pipeline.pilots[vehicle].target = None  # asked afresh at every tick: the drone never flew the replayed choices
     position = tuple(float(v) for v in state.position)
-    command = pilot.step(position, state.stamp, columns)
+    command = pipeline.tick(vehicle, state.stamp, columns)
     record = {"time": state.stamp, "position": list(position)}
     if command is not None:
         record.update(command.record())
