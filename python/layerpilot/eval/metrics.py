@@ -25,7 +25,10 @@ DISTANCE_CAP = 100.0  # metres; the distance layer's cap, also applied here
 D_V = 4.0  # metres; the paper's voxel match distance
 GT_OCCUPANCY = 0.7  # voxels strictly above this occupancy count for the 3D metrics
 # One hit from unknown gives exactly 0.7 (prob_hit); "above" therefore needs two hits.
-_ABOVE_GT = float(np.nextafter(np.float32(GT_OCCUPANCY), np.float32(1.0)))
+ABOVE_GT = float(np.nextafter(np.float32(GT_OCCUPANCY), np.float32(1.0)))
+# What a mission samples over time: the area metrics over the layers, then the 3D ones.
+MAP_METRICS = ["percent_mapped", "avg_time_since_observed", "avg_min_distance",
+               "paper_recall", "paper_mse", "precision", "recall", "f_score"]
 
 
 @dataclass(frozen=True)
@@ -141,7 +144,7 @@ def map_voxel_metrics(
     box_min: np.ndarray,
     box_max: np.ndarray,
     d_v: float = D_V,
-    min_occupancy: float = _ABOVE_GT,
+    min_occupancy: float = ABOVE_GT,
 ) -> VoxelMetrics:
     """``voxel_metrics`` on the voxels with occupancy >= ``min_occupancy`` of two maps in a box.
 

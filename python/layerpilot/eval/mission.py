@@ -34,15 +34,12 @@ from typing import TextIO
 
 import numpy as np
 
-from layerpilot.eval.metrics import area_metrics, map_voxel_metrics
+from layerpilot.eval.alignment import MapScorer
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
 from layerpilot.mission.config import Mission, to_settings
 from layerpilot.mission.pilot import Command
 from layerpilot.progress import Progress
-
-METRICS = ["percent_mapped", "avg_time_since_observed", "avg_min_distance",
-           "paper_recall", "paper_mse", "precision", "recall", "f_score"]
 
 
 @dataclass(frozen=True)
@@ -146,7 +143,8 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
         view.start(pilot.behavior, home, geometry)
     xmin, xmax, ymin, ymax = geometry.extent
     box_min, box_max = np.array([xmin, ymin, -1000.0]), np.array([xmax, ymax, 1000.0])
-    sampler = SeriesSampler(METRICS, SAMPLE_INTERVAL)
+    scorer = MapScorer(geometry, aoi, box_min, box_max)  # aligned to the truth and absolute, with the offset
+    sampler = SeriesSampler(scorer.names, SAMPLE_INTERVAL)
     sim_cfg = replace(mission.sim, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
     frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
     frames = 0
@@ -172,8 +170,7 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             columns = message = None
 
             def metrics(now: float) -> dict[str, float]:
-                area = area_metrics(service.map.column_layers_for(geometry), aoi, now)
-                return {**area.as_dict(), **map_voxel_metrics(service.map, gt, box_min, box_max).as_dict()}
+                return scorer(service.map, gt, now)
 
             while True:
                 if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec

@@ -1,0 +1,134 @@
+"""Scoring up to GNSS's common offset: the best translation between an estimated map and the truth.
+
+No pose refinement removes the offset that every GNSS position shares (it needs ground
+control); surveyors state accuracy after removing it and SLAM benchmarks align before they
+score (TUM RGB-D's absolute trajectory error, Tanks and Temples' ICP before its F-score).
+So the headline map metrics are taken after removing the single best translation between
+the estimated map and the true world, and the same metrics without it (``*_absolute``)
+stand beside them, with the translation itself (``offset_x/y/z``: estimated minus true).
+
+The translation is searched on the voxel grid (whole voxels, so shifted voxel centres stay
+on the lattice and a shifted column grid is exact), minimising the symmetric chamfer
+distance capped at the match distance d_v, and kept only if it lowers that distance: when
+the maps already agree the offset is exactly 0 and both sets of metrics are identical.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from layerpilot.eval.metrics import D_V, ABOVE_GT, MAP_METRICS, area_metrics, voxel_metrics
+from layerpilot.grid import GridGeometry
+
+if TYPE_CHECKING:  # the C++ map is imported only where a map is used
+    from layerpilot.map import VoxelMap
+
+OFFSET_KEYS = ["offset_x", "offset_y", "offset_z"]
+SCORE_NAMES = MAP_METRICS + [f"{k}_absolute" for k in MAP_METRICS] + OFFSET_KEYS
+SEARCH_STEPS = (8, 4, 2, 1)  # voxels, coarse to fine
+MAX_SEARCH_POINTS = 20_000  # per map during the search (evenly strided); the scores use every voxel
+MAX_OFFSET = 30.0  # metres per axis; several times a consumer receiver's error
+_DIRECTIONS = [d for d in itertools.product((-1, 0, 1), repeat=3) if d != (0, 0, 0)]
+
+
+def _strided(points: np.ndarray, limit: int) -> np.ndarray:
+    return points[:: max(1, math.ceil(len(points) / limit))]
+
+
+class _CappedChamfer:
+    """Mean capped nearest distance both ways between ``est - offset`` and ``gt``, per whole-voxel offset."""
+
+    def __init__(self, est: np.ndarray, gt: np.ndarray, resolution: float, cap: float) -> None:
+        self.est, self.gt = _strided(est, MAX_SEARCH_POINTS), _strided(gt, MAX_SEARCH_POINTS)
+        self.est_tree, self.gt_tree = cKDTree(self.est), cKDTree(self.gt)
+        self.resolution, self.cap = resolution, cap
+        self.cache: dict[tuple[int, int, int], float] = {}
+
+    def __call__(self, key: tuple[int, int, int]) -> float:
+        if key not in self.cache:
+            o = np.array(key, np.float64) * self.resolution
+            d_est, _ = self.gt_tree.query(self.est - o, distance_upper_bound=self.cap)
+            d_gt, _ = self.est_tree.query(self.gt + o, distance_upper_bound=self.cap)
+            self.cache[key] = float(np.minimum(d_est, self.cap).mean() + np.minimum(d_gt, self.cap).mean())
+        return self.cache[key]
+
+
+def best_offset(est: np.ndarray, gt: np.ndarray, resolution: float, start: np.ndarray | None = None,
+                cap: float = D_V, max_offset: float = MAX_OFFSET) -> np.ndarray:
+    """The whole-voxel translation (est minus truth, metres) that best lays voxel centres ``est`` onto ``gt``.
+
+    A pattern search from ``start`` (default 0: a mission passes its last offset, which GNSS's error
+    changes slowly) in steps of 8, 4, 2, 1 voxels over the 26 neighbours; the result is kept only if
+    its capped chamfer distance is strictly below the one at 0, else it is exactly 0.
+    """
+    est, gt = np.asarray(est, np.float64), np.asarray(gt, np.float64)
+    for name, arr in (("est", est), ("gt", gt)):
+        if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name}: expected finite points of shape (N, 3), got {arr.shape}")
+    if not resolution > 0:
+        raise ValueError(f"resolution: must be > 0, got {resolution}")
+    zero = np.zeros(3)
+    if len(est) == 0 or len(gt) == 0:
+        return zero
+    cost = _CappedChamfer(est, gt, resolution, cap)
+    bound = int(max_offset // resolution)
+    first = zero if start is None else np.clip(np.round(np.asarray(start, np.float64) / resolution), -bound, bound)
+    best = tuple(int(v) for v in first)
+    for step in SEARCH_STEPS:
+        while True:
+            moves = [tuple(b + step * d for b, d in zip(best, direction)) for direction in _DIRECTIONS]
+            moves = [m for m in moves if max(abs(v) for v in m) <= bound]
+            candidate = min(moves, key=cost)
+            if not cost(candidate) < cost(best):
+                break
+            best = candidate
+    if not cost(best) < cost((0, 0, 0)):
+        return zero
+    return np.array(best, np.float64) * resolution
+
+
+def _shifted(geometry: GridGeometry, offset: np.ndarray) -> GridGeometry:
+    return replace(geometry, origin_x=geometry.origin_x + float(offset[0]),
+                   origin_y=geometry.origin_y + float(offset[1]))
+
+
+@dataclass
+class MapScorer:
+    """The map metrics over a mission's area, both aligned (headline names) and absolute.
+
+    Keeps the last offset it found: the next search starts there.
+    """
+
+    geometry: GridGeometry
+    aoi: np.ndarray
+    box_min: np.ndarray
+    box_max: np.ndarray
+    d_v: float = D_V
+    min_occupancy: float = ABOVE_GT
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    names = SCORE_NAMES
+
+    def _metrics(self, est_map: "VoxelMap", gt: np.ndarray, now: float, offset: np.ndarray) -> dict[str, float]:
+        area = area_metrics(est_map.column_layers_for(_shifted(self.geometry, offset)), self.aoi, now)
+        est = est_map.voxels(self.box_min + offset, self.box_max + offset, self.min_occupancy).centers - offset
+        voxels = voxel_metrics(est, gt, self.d_v).as_dict()
+        return {k: v for k, v in {**area.as_dict(), **voxels}.items() if k in MAP_METRICS}
+
+    def __call__(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float) -> dict[str, float]:
+        """Every name in ``SCORE_NAMES`` for the estimated map against the ground-truth one at ``now``."""
+        if not np.isclose(est_map.resolution, gt_map.resolution):
+            raise ValueError(f"gt_map: resolution {gt_map.resolution} != est_map's {est_map.resolution}")
+        gt = gt_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
+        est = est_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
+        self.offset = best_offset(est, gt, est_map.resolution, start=self.offset, cap=self.d_v)
+        absolute = self._metrics(est_map, gt, now, np.zeros(3))
+        aligned = absolute if not self.offset.any() else self._metrics(est_map, gt, now, self.offset)
+        return {**aligned, **{f"{k}_absolute": v for k, v in absolute.items()},
+                **dict(zip(OFFSET_KEYS, (float(v) for v in self.offset)))}
