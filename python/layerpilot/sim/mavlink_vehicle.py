@@ -14,13 +14,20 @@ reads z = 0 on the ground there and -30 at 30 m above it; ``ekf_origin`` is that
 the map frame. The ENU/NED conversion (and the EKF origin's offset) is here and in
 ``link/`` only.
 
+Sensors (``EndpointConfig.sensors``, a :class:`SensorProfile`): the vehicle flies its true
+trajectory; every position and attitude it reports (GLOBAL_POSITION_INT, LOCAL_POSITION_NED,
+ATTITUDE, GPS_RAW_INT) carries the EKF's error, and like a real autopilot it flies position
+setpoints in its estimated frame (the true target is the commanded one minus the error, followed
+as the error wanders). Home and the EKF origin are reported exact.
+
 Usage::
 
     vehicle = Multicopter(position=(0, 0, ground_z), ground_z=ground_z)
     endpoint = MavlinkVehicle(vehicle, ["tcp:127.0.0.1:5760"])
     endpoint.start(speed=1.0)      # or: endpoint.step(0.02) from your own loop
     ...
-    endpoint.pose()                # VehiclePose in the map frame
+    endpoint.pose()                # VehiclePose in the map frame (the truth)
+    endpoint.reported_pose()       # what the autopilot's EKF reports (the truth plus the sensors' errors)
     endpoint.stop()
 """
 
@@ -44,8 +51,10 @@ from layerpilot.link.frames import (enu_to_ned, local_ned_to_map, map_to_local_n
 from layerpilot.link.mission_transfer import MissionItem
 from layerpilot.sim.auto_mission import AutoMission
 from layerpilot.sim.battery import Battery, BatteryConfig
+from layerpilot.sim.estimate import Estimator, VehiclePose
 from layerpilot.sim.mission_store import MESSAGES as MISSION_MESSAGES
 from layerpilot.sim.mission_store import MissionStore
+from layerpilot.sim.sensors import SensorProfile
 from layerpilot.sim.vehicle import Multicopter
 from layerpilot.sim.vehicle_transport import open_transport
 
@@ -119,6 +128,8 @@ class EndpointConfig:
     offboard_loss_s: float = 1.0       # PX4 COM_OF_LOSS_T
     offboard_min_rate_hz: float = 2.0  # PX4 wants a setpoint stream faster than this before OFFBOARD
     battery: BatteryConfig = field(default_factory=BatteryConfig)  # SYS_STATUS, BATTERY_STATUS, failsafe
+    sensors: SensorProfile = field(default_factory=SensorProfile)  # the EKF's errors (default: none)
+    seed: int = 0                      # of the sensor errors' generator
 
     def __post_init__(self) -> None:
         if self.flavour not in (modes.ARDUPILOT, modes.PX4):
@@ -129,18 +140,6 @@ class EndpointConfig:
             check_range(name, getattr(self, name), 0.0, None)
         for name in ("land_speed_m_s", "offboard_loss_s", "offboard_min_rate_hz"):
             check_range(name, getattr(self, name), 1e-6, None)
-
-
-@dataclass(frozen=True)
-class VehiclePose:
-    """Vehicle state in the map frame (ENU) at mission time ``time``; angles in radians, yaw CCW from east."""
-
-    time: float
-    position: np.ndarray
-    velocity: np.ndarray
-    roll: float
-    pitch: float
-    yaw: float
 
 
 class _Broadcast:
@@ -200,6 +199,8 @@ class MavlinkVehicle:
         self.messages_received = 0
         self.mission = MissionStore(self._mav)  # the mission protocol's vehicle side (upload, download)
         self._auto: AutoMission | None = None    # the stored mission's run in AUTO (ArduPilot flavour)
+        sensors = self.config.sensors
+        self.estimator = None if sensors.exact_pose else Estimator(sensors, self.config.seed)
 
     # --- public API ------------------------------------------------------------------
     @property
@@ -216,6 +217,18 @@ class MavlinkVehicle:
             roll, pitch = self.vehicle.roll_pitch
             return VehiclePose(self.time, self.vehicle.position.copy(), self.vehicle.velocity.copy(),
                                roll, pitch, self.vehicle.yaw)
+
+    def reported_pose(self) -> VehiclePose:
+        """The state the autopilot reports (its EKF's estimate): :meth:`pose` plus the sensors' errors."""
+        with self._lock:
+            return self.pose() if self.estimator is None else self.estimator.report(self.pose())
+
+    def reported_pose_at(self, t: float) -> VehiclePose:
+        """The reported state at mission time ``t`` (within the last few seconds), interpolated between reports."""
+        with self._lock:
+            if self.estimator is None or (pose := self.estimator.at(t)) is None:
+                return self.pose()
+            return pose
 
     def pause_output(self) -> None:
         """Stop sending anything (the vehicle keeps flying and listening): a link loss seen from outside."""
@@ -257,6 +270,11 @@ class MavlinkVehicle:
             self.time += dt
             self._update_modes()
             self.vehicle.step(dt)
+            if self.estimator is not None:
+                drift = self.estimator.errors.current.drift
+                self.estimator.step(dt, self.pose())
+                if self._airborne:  # in the air it flies its estimate; on the ground it stays put
+                    self.vehicle.shift_target(drift - self.estimator.errors.current.drift)
             self._after_motion(dt)
             self._send_due()
 
@@ -546,7 +564,7 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_WARNING, f"Unsupported setpoint frame {frame}")
             return None, None
         if frame == mav.MAV_FRAME_LOCAL_NED:
-            position = local_ned_to_map(n, e, d, self.ekf_origin)   # relative to the EKF origin
+            position = self._true_target(local_ned_to_map(n, e, d, self.ekf_origin))   # relative to the EKF origin
         else:
             position = tuple(np.add(ned_to_enu(n, e, d), self.vehicle.position))
         return position, ned_to_enu(vn, ve, vd)
@@ -563,7 +581,13 @@ class MavlinkVehicle:
             self._text(mav.MAV_SEVERITY_WARNING, f"Unsupported setpoint frame {frame}")
             return None, None
         x, y, z = self.config.origin.from_geodetic(msg.lat_int * 1e-7, msg.lon_int * 1e-7, alt)
-        return (float(x), float(y), float(z)), ned_to_enu(msg.vx, msg.vy, msg.vz)
+        return self._true_target((float(x), float(y), float(z))), ned_to_enu(msg.vx, msg.vy, msg.vz)
+
+    def _true_target(self, position: tuple) -> tuple:
+        """Where the vehicle goes for a target in its estimated frame: the target minus the EKF's drift."""
+        if self.estimator is None:
+            return position
+        return tuple(float(c) for c in np.subtract(position, self.estimator.errors.current.drift))
 
     def _setpoint_stream_ok(self) -> bool:
         """PX4's offboard condition: setpoints arriving faster than ``offboard_min_rate_hz`` right now."""
@@ -731,13 +755,15 @@ class MavlinkVehicle:
     def _send_system_time(self) -> None:
         self._mav.system_time_send(0, self._boot_ms())
 
-    def _geodetic(self, point=None) -> tuple[int, int, int]:
-        """A map-frame point (default: the vehicle's) as MAVLink's lat, lon (1e-7 degrees) and altitude AMSL (mm)."""
-        lat, lon, alt = self.config.origin.to_geodetic(*(self.vehicle.position if point is None else point))
+    def _geodetic(self, point) -> tuple[int, int, int]:
+        """A map-frame point as MAVLink's lat, lon (1e-7 degrees) and altitude AMSL (mm)."""
+        lat, lon, alt = self.config.origin.to_geodetic(*point)
         return int(round(float(lat) * 1e7)), int(round(float(lon) * 1e7)), int(round(float(alt) * 1000))
 
     def _send_gps_raw_int(self) -> None:
-        lat, lon, alt = self._geodetic()
+        """The receiver's own fix: its error without the EKF's (no barometer, no white noise smoothing)."""
+        gnss = 0.0 if self.estimator is None else self.estimator.errors.current.gnss
+        lat, lon, alt = self._geodetic(self.vehicle.position + gnss)
         v = self.vehicle.velocity
         fix = mav.GPS_FIX_TYPE_3D_FIX if self._has_fix() else mav.GPS_FIX_TYPE_NO_FIX
         cog = int(math.degrees(math.atan2(v[0], v[1])) % 360 * 100) if np.hypot(v[0], v[1]) > 0.2 else 0xFFFF
@@ -745,21 +771,23 @@ class MavlinkVehicle:
                                    int(np.hypot(v[0], v[1]) * 100), cog, 14 if self._has_fix() else 3)
 
     def _send_global_position_int(self) -> None:
-        lat, lon, alt = self._geodetic()
-        vn, ve, vd = enu_to_ned(*self.vehicle.velocity)
-        relative = int(round((self.vehicle.position[2] - self.home[2]) * 1000))
-        hdg = int(round(math.degrees(yaw_enu_to_ned(self.vehicle.yaw)) % 360 * 100)) % 36000
+        reported = self.reported_pose()
+        lat, lon, alt = self._geodetic(reported.position)
+        vn, ve, vd = enu_to_ned(*reported.velocity)
+        relative = int(round((reported.position[2] - self.home[2]) * 1000))
+        hdg = int(round(math.degrees(yaw_enu_to_ned(reported.yaw)) % 360 * 100)) % 36000
         self._mav.global_position_int_send(self._boot_ms(), lat, lon, alt, relative, int(vn * 100), int(ve * 100),
                                            int(vd * 100), hdg)
 
     def _send_local_position_ned(self) -> None:
-        n, e, d = map_to_local_ned(*self.vehicle.position, self.ekf_origin)
-        vn, ve, vd = enu_to_ned(*self.vehicle.velocity)
+        reported = self.reported_pose()
+        n, e, d = map_to_local_ned(*reported.position, self.ekf_origin)
+        vn, ve, vd = enu_to_ned(*reported.velocity)
         self._mav.local_position_ned_send(self._boot_ms(), n, e, d, vn, ve, vd)
 
     def _send_attitude(self) -> None:
-        roll, pitch = self.vehicle.roll_pitch
-        self._mav.attitude_send(self._boot_ms(), roll, pitch, yaw_enu_to_ned(self.vehicle.yaw), 0.0, 0.0,
+        reported = self.reported_pose()
+        self._mav.attitude_send(self._boot_ms(), reported.roll, reported.pitch, yaw_enu_to_ned(reported.yaw), 0.0, 0.0,
                                 -self.vehicle.yaw_rate)
 
     def _send_home_position(self) -> None:

@@ -6,7 +6,13 @@ Lock-step (tests, evaluation)::
         for _ in range(500):
             shot = sim.step()          # advances the mission clock by config.step_s
             if shot is not None:       # a camera frame is due every 1 / frame_rate_hz seconds
-                stamp, frame = shot    # mission time (s), CameraFrame from the vehicle's pose (stamped)
+                stamp, frame = shot    # the frame's stamp (s) and the CameraFrame the drone delivers
+        capture = sim.capture()        # or a frame now: .frame (delivered) and .truth (for scoring only)
+
+Sensors (``SimConfig.sensors``, docs/sim.md): with ``perfect`` a frame is the rendered view at the
+vehicle's pose, stamped with its time. Otherwise the camera renders at the TRUE pose, then
+degrades the image (sensor profile); the frame is stamped on the camera's clock and carries the
+pose the autopilot REPORTS at that stamp, as a camera node looking it up would find it.
 
 Process (``layerpilot sim``): :meth:`Simulator.run` paces the same steps to the
 wall clock (``speed`` times faster when > 1) and hands every frame to a callback.
@@ -20,15 +26,23 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import math
+
+import numpy as np
+
 from layerpilot.config import check_range
+from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.sim.battery import BatteryConfig
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.sim.estimate import VehiclePose
+from layerpilot.sim.sensors import SensorProfile, sensor_profile
 from layerpilot.sim.world import World, WorldConfig
 
 
 @dataclass(frozen=True)
 class SimConfig:
-    """World, camera, frame rate (mission Hz), MAVLink URLs, the autopilot flavour and its battery."""
+    """World, camera, frame rate (mission Hz), MAVLink URLs, the autopilot flavour, its battery, and the
+    sensors: a preset of :data:`layerpilot.sim.sensors.PROFILES` with single fields overridden."""
 
     world: WorldConfig = field(default_factory=WorldConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -37,18 +51,48 @@ class SimConfig:
     urls: tuple[str, ...] = ("tcp:127.0.0.1:5760",)
     flavour: str = "ardupilot"
     battery: BatteryConfig = field(default_factory=BatteryConfig)
+    sensors: str = "perfect"
+    sensor_overrides: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        sensor_profile(self.sensors, self.sensor_overrides)  # an unknown name or key is an error here
         check_range("frame_rate_hz", self.frame_rate_hz, 0.01, 100.0)
         check_range("step_s", self.step_s, 1e-4, 0.5)
         if self.flavour not in ("ardupilot", "px4"):
             raise ValueError(f"flavour: expected 'ardupilot' or 'px4', got {self.flavour!r}")
+
+    @property
+    def sensor_profile(self) -> SensorProfile:
+        return sensor_profile(self.sensors, self.sensor_overrides)
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One exposure: ``frame`` is what the drone delivers (image, stamp, reported pose); ``truth`` the same
+    exposure as it was (clean image, true camera pose and depth, stamped with the true time) and
+    ``vehicle`` the true vehicle state then. The truth is for scoring only."""
+
+    frame: CameraFrame
+    truth: CameraFrame
+    vehicle: VehiclePose
+
+
+def _tilt(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """The map-frame rotation of a roll (about the heading) and a nose-up pitch on a vehicle heading ``yaw``."""
+    def axis(u: np.ndarray, a: float) -> np.ndarray:
+        k = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+        return np.eye(3) + math.sin(a) * k + (1.0 - math.cos(a)) * k @ k
+
+    forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    left = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    return axis(forward, roll) @ axis(left, -pitch)
 
 
 class Simulator:
     """Owns the world, the renderer and the MAVLink vehicle endpoint; close() releases sockets and GL."""
 
     def __init__(self, config: SimConfig | None = None) -> None:
+        from layerpilot.sim.camera_errors import CameraErrors
         from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
         from layerpilot.sim.render import Renderer
         from layerpilot.sim.vehicle import Multicopter
@@ -57,13 +101,17 @@ class Simulator:
         self.world = World(self.config.world)
         ground = float(self.world.terrain_height(0.0, 0.0))
         self.vehicle = Multicopter(position=(0.0, 0.0, ground), ground_z=ground)
-        self.endpoint = MavlinkVehicle(self.vehicle, self.config.urls, EndpointConfig(flavour=self.config.flavour,
-                                                                                    battery=self.config.battery))
+        self.sensors = self.config.sensor_profile
+        seed = self.config.world.seed
+        self.endpoint = MavlinkVehicle(self.vehicle, self.config.urls,
+                                       EndpointConfig(flavour=self.config.flavour, battery=self.config.battery,
+                                                      sensors=self.sensors, seed=seed))
         try:
             self.renderer = Renderer(self.world, self.config.camera)
         except Exception:
             self.endpoint.close()
             raise
+        self.camera = None if self.sensors.exact_camera else CameraErrors(self.sensors, self.renderer.intrinsics, seed)
         self._next_frame = 0.0
         self.frames = 0
 
@@ -72,14 +120,37 @@ class Simulator:
         return self.endpoint.time
 
     def step(self):
-        """One vehicle step; returns (mission time, CameraFrame) when a camera frame is due, else None."""
+        """One vehicle step; returns (stamp, CameraFrame) when a camera frame is due, else None."""
         self.endpoint.step(self.config.step_s)
         if self.endpoint.time + 1e-9 < self._next_frame:
             return None
         self._next_frame += 1.0 / self.config.frame_rate_hz
-        pose = self.endpoint.pose()
         self.frames += 1
-        return pose.time, self.renderer.render_vehicle(pose.position, pose.yaw, pose.time)
+        frame = self.capture().frame
+        return frame.stamp, frame
+
+    def capture(self, now: float | None = None) -> Capture:
+        """Expose the camera now. ``now``: the time the stamps count from (default the endpoint's clock; the
+        evaluator's mission clock starts after take-off)."""
+        vehicle = self.endpoint.pose()
+        now = vehicle.time if now is None else now
+        if self.sensors.exact_pose and self.camera is None:
+            frame = self.renderer.render_vehicle(vehicle.position, vehicle.yaw, now)
+            return Capture(frame, frame, vehicle)
+        pitch = self.config.camera.pitch_deg
+        nominal = camera_pose(vehicle.position, vehicle.yaw, pitch)
+        error = self.endpoint.estimator.errors.current if self.endpoint.estimator is not None else None
+        if error is not None:  # the gimbal levels the camera on the EKF's horizon: the truth tilts by its error
+            tilt = _tilt(error.roll, error.pitch, vehicle.yaw).T
+            nominal = Pose.from_rotation(tilt @ nominal.rotation, nominal.position)
+        truth = self.renderer.render(nominal, now)
+        delay = 0.0 if self.camera is None else self.camera.stamp_error()
+        image = truth.image if self.camera is None else self.camera.degrade(truth, vehicle.velocity,
+                                                                            self.vehicle.yaw_rate)
+        reported = self.endpoint.reported_pose_at(vehicle.time + delay)
+        frame = CameraFrame(image, camera_pose(reported.position, reported.yaw, pitch), truth.intrinsics,
+                            now + delay, truth.depth)
+        return Capture(frame, truth, vehicle)
 
     def run(self, on_frame: Callable[[float, object], None] | None = None, speed: float = 1.0,
             duration: float | None = None, stop: threading.Event | None = None) -> None:

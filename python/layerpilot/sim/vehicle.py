@@ -101,6 +101,13 @@ class Multicopter:
         stop[2] = max(stop[2], self.ground_z)
         self._target = _Target(position=stop)
 
+    def shift_target(self, delta: np.ndarray) -> None:
+        """Move the position target by ``delta`` (an autopilot following its drifting estimate); none, no change."""
+        if self._target.position is not None:
+            target = self._target.position + delta
+            target[2] = max(target[2], self.ground_z)
+            self._target.position = target
+
     @property
     def position_target(self) -> np.ndarray | None:
         return None if self._target.position is None else self._target.position.copy()
