@@ -175,12 +175,12 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
             while True:
                 if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec
                     next_layers += layer_period
-                    at = sim.endpoint.pose().position - origin  # in full around the drone, as the node's
+                    at = sim.endpoint.reported_pose().position - origin  # in full around the drone, as the node's
                     message = wire.encode_columns(service.columns(), service.last_stamp, vehicle,
                                                   mission.map_server.layers,
                                                   service.detail(at[0], at[1], pilot.layer_reach))
                     columns = wire.to_column_layers(wire.decode_layer_set(message))
-                position = sim.endpoint.pose().position - origin  # in the map frame
+                position = sim.endpoint.reported_pose().position - origin  # in the map frame, as reported
                 evaluations = pilot.evaluations
                 charge = round(100 * sim.endpoint.battery.remaining) / 100  # SYS_STATUS's whole percent
                 command = pilot.step(position, t, columns, battery=charge)
@@ -199,15 +199,15 @@ def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO |
                         view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
                 if t >= next_frame - 1e-9:
                     next_frame += frame_period
-                    pose = sim.endpoint.pose()
-                    frame = sim.renderer.render_vehicle(pose.position, pose.yaw, t).seen_from(origin)
+                    capture = sim.capture(now=t)  # what the drone delivers; its truth is for scoring only
+                    pose, frame = capture.vehicle, capture.frame.seen_from(origin)
                     frames += 1
                     path.append(tuple(float(c) for c in (pose.position - origin)[:2]))
                     if view is not None:
                         view.frame(t, frame, pose.position - origin, service.map)
                     if (cloud := depth.push(frame)) is not None:
                         service.insert(cloud.points, cloud.origin, cloud.colors, t, mission.depth.max_depth)
-                    if (reference := truth.push(frame)) is not None and len(reference):
+                    if (reference := truth.push(capture.truth.seen_from(origin))) is not None and len(reference):
                         gt.insert(reference.points, reference.origin, reference.colors, stamp=t)
                 if sampler.maybe_sample(t, lambda: metrics(t)) and view is not None:
                     view.metrics(t, sampler.series.last())
