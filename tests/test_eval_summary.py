@@ -9,26 +9,31 @@ import re
 import numpy as np
 import pytest
 
-from layerpilot.eval.metrics import area_metrics, disk_mask, map_voxel_metrics
+from layerpilot.eval.alignment import MapScorer
+from layerpilot.eval.metrics import disk_mask
+from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.series import SeriesSampler
 from layerpilot.eval.summary import mean_spread, write_run_report, write_study_report
+from layerpilot.geometry import Pose
 from layerpilot.grid import GridGeometry
 
-NAMES = ["percent_mapped", "avg_time_since_observed", "avg_min_distance", "paper_recall", "paper_mse",
-         "precision", "recall", "f_score"]
 
+def _fly(run_dir, speed: float, seed: int, lift: float = 0.0):
+    """A sensor sweeping east over flat ground at z = 0, seeing a 10 m wide strip below it.
 
-def _fly(run_dir, speed: float, seed: int):
-    """A sensor sweeping east over flat ground at z = 0, seeing a 10 m wide strip below it."""
+    The estimated map is ``lift`` metres above the truth (a GNSS height error); the sensor's
+    true and estimated positions give the pose errors.
+    """
     from layerpilot.map import VoxelMap
 
     rng = np.random.default_rng(seed)
     est, gt = VoxelMap(1.0), VoxelMap(1.0)
     g = GridGeometry.centered(0.0, 0.0, 1.0, 60, 60)
     aoi = disk_mask(g, (0.0, 0.0), 25.0)
-    sampler = SeriesSampler(NAMES)
     lo, hi = np.array([-30.0, -30, -5]), np.array([30.0, 30, 5])
-    path = []
+    scorer = MapScorer(g, aoi, lo, hi)
+    sampler = SeriesSampler(scorer.names)
+    path, truth, estimate = [], [], []
     for step in range(0, 31):
         t = step * 2.0
         x = -28.0 + speed * t
@@ -38,18 +43,17 @@ def _fly(run_dir, speed: float, seed: int):
         origin = np.array([x, 0.0, 10.0])
         colors = np.tile(np.array([[30, 160, 40]], np.uint8), (len(ground), 1))
         gt.insert(ground, origin, colors, stamp=t)
-        noisy = ground + rng.normal(0, 0.4, ground.shape).astype(np.float32)
-        est.insert(noisy, origin, colors, stamp=t)
-
-        def compute() -> dict[str, float]:
-            layers = est.column_layers_for(g)
-            return {**area_metrics(layers, aoi, t).as_dict(), **map_voxel_metrics(est, gt, lo, hi).as_dict()}
-
-        sampler.maybe_sample(t, compute)
+        noisy = ground + rng.normal(0, 0.4, ground.shape).astype(np.float32) + np.float32([0, 0, lift])
+        est.insert(noisy, origin + (0, 0, lift), colors, stamp=t)
+        truth.append((t, Pose(origin)))
+        estimate.append((t, Pose(origin + (0.0, 0.0, lift + rng.normal(0, 0.3)))))
+        sampler.maybe_sample(t, lambda: scorer(est, gt, t))
     layers = est.column_layers_for(g)
+    offset = [sampler.series.last()[k] for k in ("offset_x", "offset_y", "offset_z")]
     paths = write_run_report(
         run_dir, f"sweep {speed}", sampler.series, layers, aoi, np.array(path),
         {"elevation": layers.elevation}, {"speed_m_s": speed, "seed": seed},
+        final_extra=pose_errors(truth, estimate, offset).as_dict("raw"),
     )
     return sampler.series, paths
 
@@ -70,6 +74,20 @@ def test_run_report_has_every_section_and_sensible_values(tmp_path) -> None:
     assert len(images) == len(series.names) + 2
     assert all(base64.b64decode(i)[:8] == b"\x89PNG\r\n\x1a\n" for i in images)
     assert (tmp_path / "run" / "metrics.csv").read_text().startswith("t,percent_mapped,")
+    assert final["offset_z"] == 0.0 and final["f_score"] == final["f_score_absolute"]  # zero-mean noise: no offset
+    assert final["raw_position_median"] == pytest.approx(0.3 * 0.674, abs=0.1)  # median |N(0, 0.3)|
+    assert "<th>aligned to the truth</th><th>absolute</th>" in page
+
+
+def test_a_lifted_map_is_scored_after_its_offset_and_without_it(tmp_path) -> None:
+    series, paths = _fly(tmp_path / "run", 1.0, 0, lift=2.0)
+    final = json.loads(paths["json"].read_text())["final"]
+    assert (final["offset_x"], final["offset_y"], final["offset_z"]) == (0.0, 0.0, 2.0)
+    assert final["paper_mse_absolute"] - final["paper_mse"] > 0.8  # the 2 m lift is not counted
+    assert final["raw_position_median"] < 0.5  # the lift is removed from the pose errors too
+    md = paths["md"].read_text()
+    assert "| 3D MSE (paper, m), absolute |" not in md  # one row per metric, its absolute value beside it
+    assert re.search(r"\| 3D MSE \(paper, m\) \| [0-9.]+ \| [0-9.]+ \|", md)
 
 
 def test_study_report_compares_behaviors_over_seeds(tmp_path) -> None:
@@ -88,6 +106,9 @@ def test_study_report_compares_behaviors_over_seeds(tmp_path) -> None:
     page = paths["html"].read_text()
     assert "Table 1" in page and page.count(">fast: flight path<") == 1
     assert page.count(">slow: layer elevation<") == 1
+    assert "<h2>Scoring up to the map&#x27;s offset (mean ± std)</h2>" in page
+    assert "<h2>Pose error over the mission (mean ± std)</h2>" in page and "<th>raw position p90 (m)</th>" in page
+    assert "refined position" not in page  # what no run holds is left out
     with pytest.raises(ValueError, match="runs"):
         write_study_report(tmp_path / "x", {"fast": []}, {})
 

@@ -25,6 +25,32 @@ from layerpilot.map.columns import ColumnLayers
 TABLE1 = ["percent_mapped", "avg_time_since_observed", "avg_min_distance", "paper_recall", "paper_mse"]
 TABLE1_HEADERS = ["percent observed (%)", "avg time (s)", "avg distance (m)", "3D recall", "3D MSE (m)"]
 STANDARD_3D = ["precision", "recall", "f_score"]
+ABSOLUTE = "_absolute"  # the same metric without removing the map's offset (eval/alignment.py)
+# Scoring up to the offset: what a run holds of these is tabled (absent keys are left out).
+OFFSET_COLUMNS = {"percent_mapped": "area (%)", "percent_mapped_absolute": "area absolute (%)",
+                  "f_score": "F-score", "f_score_absolute": "F-score absolute",
+                  "precision": "precision", "precision_absolute": "precision absolute",
+                  "offset_x": "offset x (m)", "offset_y": "offset y (m)", "offset_z": "offset z (m)"}
+POSE_COLUMNS = {f"{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k, text in
+                (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
+                 ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"))}
+
+
+def label(name: str) -> str:
+    """A metric's readable name; ``*_absolute`` is its base metric's, marked."""
+    if name.endswith(ABSOLUTE):
+        base = name[: -len(ABSOLUTE)]
+        return f"{LABELS.get(base, base)}, absolute"
+    return LABELS.get(name, name)
+
+
+def final_table(final: Mapping[str, float]) -> tuple[list[str], list[list[Any]]]:
+    """Headers and rows of a run's final metrics: each metric beside its ``*_absolute`` twin when there is one."""
+    names = [k for k in final if k != "t" and not (k.endswith(ABSOLUTE) and k[: -len(ABSOLUTE)] in final)]
+    if not any(f"{k}{ABSOLUTE}" in final for k in names):
+        return ["metric", "value"], [[label(k), final[k]] for k in names]
+    return (["metric", "aligned to the truth", "absolute"],
+            [[label(k), final[k], final.get(f"{k}{ABSOLUTE}", "")] for k in names])
 
 
 def write_run_report(
@@ -36,22 +62,30 @@ def write_run_report(
     path_xy: np.ndarray,
     layer_images: Mapping[str, np.ndarray],
     settings: Mapping[str, Any],
+    final_extra: Mapping[str, float] | None = None,
 ) -> dict[str, Path]:
-    """Write the CSV, plots and report.html/.md/metrics.json of one mission into ``run_dir``."""
+    """Write the CSV, plots and report.html/.md/metrics.json of one mission into ``run_dir``.
+
+    ``final_extra``: final values that are no time series (e.g. the pose errors over the mission).
+    """
     out = Path(run_dir)
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
     series.to_csv(out / "metrics.csv")
-    final = series.last()
+    final = {**series.last(), **(final_extra or {})}
     report = Report(title)
     report.heading("Final metrics")
-    report.table(["metric", "value"], [[LABELS.get(k, k), v] for k, v in final.items() if k != "t"])
+    report.table(*final_table(final))
     report.text(f"Sampled every 10 simulated seconds; last sample at t = {final['t']:.1f} s.")
+    if "offset_x" in final:
+        report.text("Aligned: after removing the single best translation between the map and the true world "
+                    "(offset x/y/z, estimated minus true, whole voxels; 0 when it does not help); absolute: without "
+                    "it. Pose errors: position after the same translation, attitude as the rotation angle.")
     report.heading("Settings")
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
     for name in series.names:
-        report.image(plot_metric({title: [series]}, name, plots / f"metric_{name}.png"), LABELS.get(name, name))
+        report.image(plot_metric({title: [series]}, name, plots / f"metric_{name}.png"), label(name))
     report.heading("Flight path")
     report.image(
         plot_flight_path(layers, path_xy, aoi, plots / "flight_path.png", title),
@@ -75,8 +109,14 @@ def mean_spread(values: Sequence[float]) -> str:
 
 
 def study_table(finals: Mapping[str, Sequence[Mapping[str, float]]], keys: Sequence[str]) -> list[list[str]]:
-    """One row per behavior: its name, then mean ± spread over seeds of each key."""
-    return [[behavior] + [mean_spread([run[k] for run in runs]) for k in keys] for behavior, runs in finals.items()]
+    """One row per behavior: its name, then mean ± spread over seeds of each key (a run without it: NaN)."""
+    return [[behavior] + [mean_spread([run.get(k, math.nan) for run in runs]) for k in keys]
+            for behavior, runs in finals.items()]
+
+
+def present(finals: Mapping[str, Sequence[Mapping[str, float]]], columns: Mapping[str, str]) -> dict[str, str]:
+    """The columns that at least one run has."""
+    return {k: h for k, h in columns.items() if any(k in run for runs in finals.values() for run in runs)}
 
 
 def milestone_table(milestones: Mapping[str, Sequence[Mapping[str, float]]]) -> list[list[str]]:
@@ -125,6 +165,11 @@ def write_study_report(
     report.table(["behavior"] + TABLE1_HEADERS, study_table(finals, TABLE1))
     report.heading("Standard 3D metrics at d_v = 4 m")
     report.table(["behavior", "precision", "recall (completeness)", "F-score"], study_table(finals, STANDARD_3D))
+    for heading, columns in (("Scoring up to the map's offset (mean ± std)", OFFSET_COLUMNS),
+                             ("Pose error over the mission (mean ± std)", POSE_COLUMNS)):
+        if shown := present(finals, columns):
+            report.heading(heading)
+            report.table(["behavior", *shown.values()], study_table(finals, list(shown)))
     report.heading("Runs")
     report.text("Stereo clouds: camera frames that found a usable stereo partner and reached the map; "
                 "a behavior whose motion the picker rejects (e.g. flying straight along the camera's axis) "
@@ -134,7 +179,7 @@ def write_study_report(
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
     for name in next(iter(series.values()))[0].names:
-        report.image(plot_metric(series, name, plots / f"metric_{name}.png"), LABELS.get(name, name))
+        report.image(plot_metric(series, name, plots / f"metric_{name}.png"), label(name))
     report.heading("Flight paths and final layers (first seed)")
     for behavior, ds in dirs.items():
         for png in sorted((ds[0] / "plots").glob("flight_path.png")) + sorted((ds[0] / "plots").glob("layer_*.png")):
