@@ -258,7 +258,7 @@ def test_the_simulated_battery_fails_safe_as_arducopter_and_the_link_node_report
             sub.undeclare()
             vehicle.pause_output()  # what was sent so far, and no more
             link = node.link
-            assert vehicle.mode == "RTL" and "Battery 1 is low 15.00V used 100 mAh" in link._texts  # ArduCopter's
+            assert vehicle.mode == "RTL" and "Battery 1 is low 15.00V used 100 mAh" in link.state.texts  # ArduCopter's
             # the autopilot's own failsafe, not a pilot: the text came just before the mode change
             found = re.fullmatch(r"returning home: autopilot failsafe: battery \(Battery 1 is low 15\.00V used "
                                  r"100 mAh, (\d+)% left\): RTL", node.phase)

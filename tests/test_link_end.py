@@ -135,7 +135,7 @@ def test_an_ekf_without_a_horizontal_position_is_not_a_position(vehicle):
     with FlightLink(LinkConfig(url=url_of(vehicle), **FAST)) as link:
         link.connect(5.0)
         wait_for(lambda: link.position_valid, "a position", timeout=5)
-        link._ekf_flags = mav.EKF_ATTITUDE | mav.EKF_POS_VERT_ABS | mav.EKF_CONST_POS_MODE  # ArduPilot without GPS
+        link.state.ekf_flags = mav.EKF_ATTITUDE | mav.EKF_POS_VERT_ABS | mav.EKF_CONST_POS_MODE  # ArduPilot without GPS
         assert not link.position_valid
         assert any(m.startswith("EKF position (EKF_STATUS_REPORT flags 0x") for m in link.missing())
 

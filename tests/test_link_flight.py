@@ -143,7 +143,7 @@ def test_refusals_are_reported_with_the_mav_result_name(vehicle, link):
     assert info.value.result_name == "MAV_RESULT_FAILED"
     assert "MAV_CMD_COMPONENT_ARM_DISARM rejected: MAV_RESULT_FAILED" in link.events
     # an ACK nobody waits for (a stream request the vehicle cannot serve) is reported too
-    link._command_long(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_WIND, 1e5)
+    link.commands.send(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_WIND, 1e5)
     wait_until(lambda: "MAV_CMD_SET_MESSAGE_INTERVAL rejected: MAV_RESULT_FAILED" in link.events, 5.0,
                "the unsolicited rejection report")
     # waypoints outside the area / altitude limits are refused before anything is sent
@@ -177,7 +177,7 @@ def test_arm_retries_until_prearm_passes_and_readiness_names_what_is_missing():
                 lk.wait_ready(timeout=0.3)
             assert "position estimate (LOCAL_POSITION_NED)" in info.value.missing
             lk.set_mode("GUIDED")
-            lk._in_control = True
+            lk.control.in_control = True
             lk.arm(timeout=6.0)                     # refused (PreArm) until the checks pass, then armed
             assert lk.armed
             assert "MAV_CMD_COMPONENT_ARM_DISARM rejected: MAV_RESULT_FAILED" in lk.events

@@ -1,9 +1,12 @@
-"""Open a MAVLink 2 connection by URL (pymavlink) with the ids layerpilot speaks with."""
+"""Open a MAVLink 2 connection by URL (pymavlink) with the ids layerpilot speaks with, and keep one open."""
 
 from __future__ import annotations
 
 import os
 import re
+import threading
+import time
+from collections.abc import Callable
 
 _NETWORK = re.compile(r"^(tcp|tcpin|udp|udpin|udpout|udpbcast):([^:]*):(\d+)$")
 _SERIAL = re.compile(r"^(?:serial:)?(/dev/[^:]+|COM\d+)(?::(\d+))?$")
@@ -31,7 +34,7 @@ def open_connection(url: str, source_system: int, source_component: int, baud: i
     """A pymavlink connection speaking MAVLink 2 with the ardupilotmega dialect (a superset of common).
 
     One connection attempt, no hidden reconnection inside pymavlink (it would block
-    the caller): :class:`~layerpilot.link.link.FlightLink` reconnects on its own schedule.
+    the caller): :class:`MavlinkPort` reconnects on the flight link's schedule.
     """
     from pymavlink import mavutil  # here: parse_url validates configs without loading pymavlink
 
@@ -48,3 +51,72 @@ def open_connection(url: str, source_system: int, source_component: int, baud: i
 
 def _closed() -> None:
     raise ConnectionError("connection closed by the other end")
+
+
+RECONNECT_PERIOD_S = 1.0  # while lost, a stream connection (TCP, serial) is reopened this often
+
+
+class MavlinkPort:
+    """The flight link's connection: opened at once, reopened when it fails or (TCP, serial) falls silent.
+
+    Sends from any thread are serialised and dropped while there is no connection (the link's
+    failsafes report that); only the link's worker thread receives, opens and reopens.
+    """
+
+    def __init__(self, url: str, source_system: int, source_component: int, baud: int) -> None:
+        self.url = url
+        self._ids = (source_system, source_component)
+        self._baud = baud
+        self._stream = not url.startswith("udp")  # UDP has no connection to reopen
+        self._lock = threading.Lock()
+        self._conn = None
+        self.error = ""  # why the last attempt to open failed ("Connection refused")
+        self._reopen_at = 0.0
+        self.open()
+
+    @property
+    def is_open(self) -> bool:
+        return self._conn is not None
+
+    def open(self) -> None:
+        """(Re)open the connection once; on failure :meth:`keep_open` tries again after RECONNECT_PERIOD_S."""
+        self._reopen_at = time.monotonic() + RECONNECT_PERIOD_S
+        self.close()
+        try:
+            conn = open_connection(self.url, *self._ids, self._baud)
+        except OSError as exc:
+            self.error = exc.strerror or str(exc)  # "Connection refused", not "[Errno 111] ..."
+            return
+        with self._lock:
+            self._conn = conn
+
+    def keep_open(self, now: float, silent: bool) -> None:
+        """Reopen a closed connection, or a stream connection whose other end is ``silent``, at most once
+        per RECONNECT_PERIOD_S."""
+        if now >= self._reopen_at and (self._conn is None or (self._stream and silent)):
+            self.open()
+
+    def close(self) -> None:
+        with self._lock:
+            conn, self._conn = self._conn, None
+        if conn is not None:
+            try:
+                conn.close()
+            except (OSError, AttributeError):  # pymavlink's TCP close after a failed reconnect has no socket
+                pass
+
+    def receive(self, timeout: float):
+        """The next message within ``timeout`` seconds, or None; OSError/ConnectionError when the connection
+        broke (TCP reset, serial unplugged)."""
+        conn = self._conn
+        return None if conn is None else conn.recv_match(blocking=True, timeout=timeout)
+
+    def transmit(self, send: Callable) -> None:
+        """``send(encoder)`` with the connection's MAVLink encoder; dropped while disconnected."""
+        with self._lock:
+            if self._conn is None:
+                return
+            try:
+                send(self._conn.mav)
+            except OSError:
+                pass
