@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import math
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 
 import exifread
@@ -53,6 +54,7 @@ class PhotoMetadata:
     flight_pitch: float | None = None
     flight_roll: float | None = None
     relative_altitude: float | None = None  # metres above take-off
+    taken_at: float | None = None  # s: EXIF DateTimeOriginal (+ SubSecTimeOriginal) read as UTC; differences count
 
     @property
     def has_position(self) -> bool:
@@ -100,6 +102,17 @@ def _sensor_width_mm(tags: dict, width: int) -> float | None:
     return width / res * unit if res and unit else None
 
 
+def _taken_at(tags: dict) -> float | None:
+    """EXIF's "YYYY:MM:DD HH:MM:SS" capture time with its sub-seconds; None if absent or malformed."""
+    text = str(tags.get("EXIF DateTimeOriginal", "")).strip()
+    try:
+        t = datetime.strptime(text, "%Y:%m:%d %H:%M:%S").replace(tzinfo=timezone.utc).timestamp()
+    except ValueError:
+        return None
+    sub = str(tags.get("EXIF SubSecTimeOriginal", "")).strip()
+    return t + (float(f"0.{sub}") if sub.isdigit() else 0.0)
+
+
 def read_metadata(path: str | Path) -> PhotoMetadata:
     """EXIF and XMP of one JPEG; ValueError names the file when it is not a readable photo."""
     path = Path(path)
@@ -131,4 +144,5 @@ def read_metadata(path: str | Path) -> PhotoMetadata:
         lon=_degrees(tags, "GPS GPSLongitude", "GPS GPSLongitudeRef", "W"), alt=alt,
         focal_mm=_number(tags, "EXIF FocalLength"), focal_35mm=_number(tags, "EXIF FocalLengthIn35mmFilm"),
         sensor_width_mm=_sensor_width_mm(tags, int(width)),
-        make=str(tags.get("Image Make", "")).strip(), model=str(tags.get("Image Model", "")).strip(), **attitude)
+        make=str(tags.get("Image Make", "")).strip(), model=str(tags.get("Image Model", "")).strip(),
+        taken_at=_taken_at(tags), **attitude)
