@@ -28,7 +28,16 @@ def octomap_data() -> Path:
 
 def free_tcp_port() -> int:
     """A TCP port nobody listens on right now (for a mission's simulated MAVLink vehicles)."""
-    with socket.socket() as s:
+    return _free_port(socket.SOCK_STREAM)
+
+
+def free_udp_port() -> int:
+    """A UDP port nobody uses right now (MAVLink over UDP, MAVProxy's outputs)."""
+    return _free_port(socket.SOCK_DGRAM)
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 

@@ -6,7 +6,6 @@ clock by nature, so the tests shorten them through LinkConfig.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -14,15 +13,16 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from conftest import free_tcp_port, free_udp_port
 from layerpilot.cli import main as cli_main
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import (CommandRejected, ControlLost, FlightLink, LinkError, LinkLost, NotReady,
                                   WaypointRefused)
-from layerpilot.link.relay import MavProxyRelay, free_port
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
+from mavlink_relay import MavProxyRelay
 
 SPEED = 10.0
 FAST = dict(arrival_hold_s=0.3, arrival_tolerance_m=0.5, command_timeout_s=1.0, ready_timeout_s=10.0)
@@ -309,7 +309,7 @@ def test_px4_offboard_flight_and_fallback_recovery():
 
 
 def test_link_flies_through_mavproxy(vehicle):
-    port = free_port()
+    port = free_udp_port()
     with MavProxyRelay(url_of(vehicle), [f"udp:127.0.0.1:{port}"]):
         with FlightLink(LinkConfig(url=f"udpin:127.0.0.1:{port}", **FAST)) as lk:
             lk.connect(60.0)
@@ -340,7 +340,7 @@ def test_command_line(vehicle, capsys):
 
 
 def test_reconnects_when_the_vehicle_comes_back_on_the_same_port():
-    port = free_port(socket.SOCK_STREAM)
+    port = free_tcp_port()
     url = f"tcp:127.0.0.1:{port}"
     with FlightLink(LinkConfig(url=url, heartbeat_timeout_s=1.0, **FAST)) as lk:
         with pytest.raises(LinkLost, match="Connection refused"):

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from conftest import free_udp_port
 from layerpilot.geodesy import LocalFrame
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
 from layerpilot.link.mission_transfer import GLOBAL, MissionItem
-from layerpilot.link.relay import free_port
 from layerpilot.sim.mavlink_vehicle import DEFAULT_INTERVALS, SITL_DATUM, EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter, VehicleLimits
 
@@ -381,7 +381,7 @@ def test_hold_brakes_to_the_stopping_point_without_coming_back():
 
 
 def test_udp_endpoints_px4_sitl_style_and_udpin():
-    port = free_port()
+    port = free_udp_port()
     endpoint = MavlinkVehicle(Multicopter(), [f"udpout:127.0.0.1:{port}", "udpin:127.0.0.1:0"])
     listener = open_connection(f"udpin:127.0.0.1:{port}", 255, 190)        # like an offboard API on 14540
     sender = open_connection(f"udpout:127.0.0.1:{endpoint.addresses[1][1]}", 254, 190)

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from conftest import free_udp_port
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import enu_to_ned
-from layerpilot.link.relay import MavProxyRelay, free_port
 from layerpilot.sim.mavlink_vehicle import MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
+from mavlink_relay import MavProxyRelay
 
 SPEED = 4.0  # mission clock runs 4x faster than the wall clock
 
@@ -42,7 +43,7 @@ def command(conn, cmd: int, *params: float) -> int:
 
 
 def test_script_flies_through_mavproxy(vehicle):
-    port = free_port()
+    port = free_udp_port()
     master = f"tcp:127.0.0.1:{vehicle.addresses[0][1]}"
     with MavProxyRelay(master, [f"udp:127.0.0.1:{port}"]) as relay:
         script = open_connection(f"udpin:127.0.0.1:{port}", 255, 191)

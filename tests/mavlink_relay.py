@@ -9,18 +9,10 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A loopback port nobody uses right now (UDP by default)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class MavProxyRelay:
