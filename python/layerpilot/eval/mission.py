@@ -1,25 +1,29 @@
-"""One scored mission in one process, in lock-step, driving the mission core's step objects.
+"""One scored mission in one process, in lock-step, driving the mission pipeline.
 
-camera -> depth service -> map service -> layer set (through the bus codec, as on the wire)
--> pilot -> MAVLink -> simulated vehicle. The pilot, map service and depth service are the
-very objects the live nodes call (``layerpilot.mission``), built from the same mission file,
-so what the study scores is what flies. Waypoints reach the simulated vehicle through the
-real flight link (``FlightLink``) over MAVLink on a loopback TCP port.
+camera -> depth -> map -> layer set (through the bus codec, as on the wire) -> pilot -> MAVLink ->
+simulated vehicle. The :class:`~layerpilot.mission.pipeline.MissionPipeline` is the object the live
+nodes drive, built from the same mission file, so what the study scores is what flies; waypoints
+reach the simulated vehicle through the real flight link (``FlightLink``) over MAVLink on a
+loopback TCP port.
 
-The map service publishes a layer set every ``1 / map_server.layers_rate`` mission seconds
-and the pilot steps on every simulator step with the newest one, as the decide node does
-with the newest layer set and pose it heard. Everything is a function of the seeds: the
-take-off (connect, pre-arm, GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's
-wall-clock waits and is not scored; when it is done the vehicle is placed exactly at the
-hover point (0, 0, altitude) at rest with a full battery and the mission clock starts at 0
-there. Two runs with the same mission are identical to the bit. The pilot hears the battery
-as the autopilot reports it (SYS_STATUS's whole percent, read from the endpoint in step);
+The map publishes a layer set every ``1 / map_server.layers_rate`` mission seconds and the pilot
+steps on every simulator step with the newest one, as the decide node does with the newest layer
+set and pose it heard. Everything is a function of the seeds: the take-off (connect, pre-arm,
+GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's wall-clock waits and is not scored;
+when it is done the vehicle is placed exactly at the hover point (0, 0, altitude) at rest with a
+full battery and the mission clock starts at 0 there. Two runs with the same mission are identical
+to the bit. The pilot hears the battery as the autopilot reports it (SYS_STATUS's whole percent);
 once it turns home for the battery the mission ends when it is there (``ended`` in the report).
 
-Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin
-at the EKF origin on the ground at home (the decide behavior's altitude is a height above
-home). The simulator renders in its world's frame; the camera frames and the pilot's position
-are moved into the map frame by the endpoint's ``ekf_origin``, as the live sim node does.
+Stages overlap where the data allows (``evaluation.overlap``): a frame's stereo and insertion run
+on one worker and the ground-truth reference on another while the simulator flies on and renders
+the next frame; the main thread waits for them only where their result is read (the next layer
+set, a metric sample, the end), so the results are byte-identical to the sequential order.
+
+Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin at the
+EKF origin on the ground at home (the decide behavior's altitude is a height above home). The
+simulator renders in its world's frame; the camera frames and the pilot's position are moved into
+the map frame by the endpoint's ``ekf_origin``, as the live sim node does.
 """
 
 from __future__ import annotations
@@ -28,18 +32,33 @@ import json
 import logging
 import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TextIO
+from typing import Callable, TextIO
 
 import numpy as np
 
+from layerpilot.bus import layerset as wire
+from layerpilot.decide import area_geometry, zone_mask
+from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.eval.alignment import MapScorer
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
+from layerpilot.geometry import CameraFrame, Pose
+from layerpilot.layers import compute_layers
+from layerpilot.link.config import LinkConfig
+from layerpilot.link.link import FlightLink, WaypointRefused
+from layerpilot.map import VoxelMap
+from layerpilot.mission import resume as survey
+from layerpilot.mission.build import geofence_for
 from layerpilot.mission.config import Mission, to_settings
 from layerpilot.mission.pilot import Command
+from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.progress import Progress
+from layerpilot.sim.simulator import Simulator
+
+_log = logging.getLogger("layerpilot.eval")
 
 
 @dataclass(frozen=True)
@@ -64,7 +83,35 @@ class MissionResult:
     pilot_inputs: list[PilotInput] = field(default_factory=list)  # filled when asked to record them
 
 
-def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
+class Stages:
+    """Work handed off the main thread, in order per lane; ``settle`` waits until every lane is done.
+
+    ``overlap`` False runs each job at once in the caller: the sequential order, for comparison.
+    """
+
+    def __init__(self, lanes: tuple[str, ...], overlap: bool) -> None:
+        self._pools = {lane: ThreadPoolExecutor(1, thread_name_prefix=f"mission-{lane}") for lane in lanes} \
+            if overlap else {}
+        self._pending: list[Future] = []
+
+    def submit(self, lane: str, job: Callable[[], None]) -> None:
+        if not self._pools:
+            job()
+        else:
+            self._pending.append(self._pools[lane].submit(job))
+
+    def settle(self) -> None:
+        pending, self._pending = self._pending, []
+        for f in pending:
+            f.result()  # a job's exception is raised here, in the mission thread
+
+    def close(self) -> None:
+        self.settle()
+        for pool in self._pools.values():
+            pool.shutdown()
+
+
+def _take_off(sim: Simulator, link: FlightLink, altitude: float, cruise_speed: float | None) -> None:
     """Connect, arm, take off and set the cruise speed over MAVLink; the simulator steps meanwhile."""
     done = threading.Event()
     error: list[BaseException] = []
@@ -93,13 +140,9 @@ def _take_off(sim, link, altitude: float, cruise_speed: float | None) -> None:
         raise RuntimeError(f"take-off over MAVLink failed: {error[0]}") from error[0]
 
 
-def flight_link(mission: Mission, url: str):
+def flight_link(mission: Mission, url: str) -> FlightLink:
     """The evaluator's flight link to the simulated vehicle, with the mission's geofence, as the live link
     node has it. Heartbeats come at 1 Hz of mission time; a slow lock-step frame must not look like a lost link."""
-    from layerpilot.link.config import LinkConfig
-    from layerpilot.link.link import FlightLink
-    from layerpilot.mission.build import geofence_for
-
     return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission))
 
 
@@ -111,139 +154,192 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
-                record_inputs: bool = False, view=None) -> MissionResult:
-    """Fly the mission's first vehicle and write the run directory (report, metrics, plots, maps, decisions).
+class LockstepMission:
+    """The mission's first vehicle flown in lock-step through the pipeline, scored against the truth."""
 
-    ``view``: a ``viz.lockstep.LockstepView`` that is shown the run as it flies (None: no view, no rerun).
-    """
-    from layerpilot.bus import layerset as wire
-    from layerpilot.decide import area_geometry, zone_mask
-    from layerpilot.depth.source import GroundTruthDepth
-    from layerpilot.layers import compute_layers
-    from layerpilot.link.link import WaypointRefused
-    from layerpilot.map import VoxelMap
-    from layerpilot.mission import resume as survey
-    from layerpilot.mission.build import build_depth_service, build_pilot
-    from layerpilot.mission.map_service import MapService
-    from layerpilot.sim.simulator import Simulator
+    def __init__(self, mission: Mission, progress_stream: TextIO | None = None, *, record_inputs: bool = False,
+                 view=None, overlap: bool | None = None) -> None:
+        """``view``: a ``viz.lockstep.LockstepView`` shown the run as it flies (None: no view, no rerun).
+        ``overlap``: run the stages side by side (default: ``evaluation.overlap``)."""
+        self.mission, self.vehicle = mission, mission.vehicles[0]
+        self.view, self.record_inputs, self.progress_stream = view, record_inputs, progress_stream
+        self.overlap = mission.evaluation.overlap if overlap is None else overlap
+        # the run directory gets the map, not the mission's snapshot path
+        mission = replace(mission, map_server=replace(mission.map_server, snapshot=""))
+        self.pipeline = MissionPipeline(mission, vehicles=[self.vehicle])
+        self.pilot = self.pipeline.pilots[self.vehicle]
+        self.truth, self.gt = GroundTruthDepth(), VoxelMap(mission.map_server.resolution)  # what the map is scored on
+        home = mission.decide.home
+        self.geometry = area_geometry(self.pilot.behavior.area, home, resolution=mission.map_server.resolution)
+        self.aoi = zone_mask(self.pilot.behavior.area, self.geometry, home) > 0.5
+        xmin, xmax, ymin, ymax = self.geometry.extent
+        # aligned to the truth and absolute, with the offset
+        self.scorer = MapScorer(self.geometry, self.aoi, np.array([xmin, ymin, -1000.0]),
+                                np.array([xmax, ymax, 1000.0]))
+        self.sampler = SeriesSampler(self.scorer.names, SAMPLE_INTERVAL)
+        self.frames = 0
+        self.path: list[tuple[float, float]] = []
+        self.records: list[dict] = []
+        self.inputs: list[PilotInput] = []
+        self.columns = self.message = None
+        self._telemetry: list[tuple[float, Pose]] = []  # poses since the last frame, for the depth lane
 
-    wall0 = time.monotonic()
-    out = Path(run_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    ev, vehicle = mission.evaluation, mission.vehicles[0]
-    pilot = build_pilot(mission)
-    service = MapService(replace(mission.map_server, snapshot=""))  # the run directory gets the map
-    depth = build_depth_service(mission)
-    truth, gt = GroundTruthDepth(), VoxelMap(mission.map_server.resolution)  # the reference the map is scored on
-    home = mission.decide.home
-    geometry = area_geometry(pilot.behavior.area, home, resolution=mission.map_server.resolution)
-    aoi = zone_mask(pilot.behavior.area, geometry, home) > 0.5
-    if view is not None:
-        view.start(pilot.behavior, home, geometry)
-    xmin, xmax, ymin, ymax = geometry.extent
-    box_min, box_max = np.array([xmin, ymin, -1000.0]), np.array([xmax, ymax, 1000.0])
-    scorer = MapScorer(geometry, aoi, box_min, box_max)  # aligned to the truth and absolute, with the offset
-    sampler = SeriesSampler(scorer.names, SAMPLE_INTERVAL)
-    sim_cfg = replace(mission.sim, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
-    frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
-    frames = 0
-    path: list[tuple[float, float]] = []
-    records: list[dict] = []
-    inputs: list[PilotInput] = []
-    with Simulator(sim_cfg) as sim:
-        host, port = sim.endpoint.addresses[0]
-        link = flight_link(mission, f"tcp:{host}:{port}")
-        try:
-            altitude = pilot.behavior.altitude
-            _take_off(sim, link, altitude, pilot.cruise_speed or None)
-            origin = np.asarray(sim.endpoint.ekf_origin, float)  # the map frame's origin in the world
-            hover = np.array([home[0], home[1], altitude])
-            link.set_waypoint(*hover, yaw=0.0)
+    @property
+    def map(self) -> VoxelMap:
+        return self.pipeline.map.map
+
+    def run(self, run_dir: str | Path) -> MissionResult:
+        """Fly, then write the run directory (report, metrics, plots, maps, decisions)."""
+        wall0 = time.monotonic()
+        out = Path(run_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        if self.view is not None:
+            self.view.start(self.pilot.behavior, self.mission.decide.home, self.geometry)
+        ev = self.mission.evaluation
+        sim_cfg = replace(self.mission.sim, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
+        stages = Stages(("depth", "truth"), self.overlap)
+        with Simulator(sim_cfg) as sim:
+            host, port = sim.endpoint.addresses[0]
+            link = flight_link(self.mission, f"tcp:{host}:{port}")
+            try:
+                t, position = self._fly(sim, link, stages)
+            finally:
+                stages.close()
+                link.close()
+        return self._write(out, link, t, position, time.monotonic() - wall0)
+
+    def _fly(self, sim: Simulator, link: FlightLink, stages: Stages) -> tuple[float, tuple[float, float, float]]:
+        mission, ev, pilot = self.mission, self.mission.evaluation, self.pilot
+        altitude = pilot.behavior.altitude
+        _take_off(sim, link, altitude, pilot.cruise_speed or None)
+        origin = np.asarray(sim.endpoint.ekf_origin, float)  # the map frame's origin in the world
+        home = mission.decide.home
+        hover = np.array([home[0], home[1], altitude])
+        link.set_waypoint(*hover, yaw=0.0)
+        sim.endpoint.step(ev.step_s)
+        v = sim.vehicle
+        v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + origin, 0.0, 0.0, 0.0, 0.0
+        sim.endpoint.battery.swap()  # full at the mission clock's 0: the wall-paced take-off must not count
+        steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
+        progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", self.progress_stream)
+        frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
+        next_frame = next_layers = t = 0.0
+        while True:
+            position = sim.endpoint.reported_pose().position - origin  # in the map frame, as the autopilot reports it
+            self.pipeline.pose(self.vehicle, t, Pose(position))
+            self._telemetry.append((t, Pose(position)))
+            frame = None
+            if t >= next_frame - 1e-9:  # rendered first: it needs only the pose, while the last frame's stereo runs
+                next_frame += frame_period
+                capture = sim.capture(now=t)  # what the drone delivers; its truth is for scoring only
+                frame, reference = capture.frame.seen_from(origin), capture.truth.seen_from(origin)
+            if t >= next_layers - 1e-9:  # the map's layer set, through the wire codec: every cloud so far is in
+                next_layers += layer_period
+                stages.settle()
+                self._layers()
+            self._pilot_step(link, position, t, round(100 * sim.endpoint.battery.remaining) / 100)
+            if frame is not None:
+                self._frame(t, frame, reference, position, stages)
+            if self.sampler.due(t):
+                stages.settle()
+                self.sampler.maybe_sample(t, lambda: self.scorer(self.map, self.gt, t))
+                if self.view is not None:
+                    self.view.metrics(t, self.sampler.series.last())
+            last = self.sampler.series.last() if len(self.sampler.series) else {}
+            progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(self.records)}")
+            if t >= ev.duration - 1e-9 or (pilot.ending and pilot.arrived(position)):
+                break  # the duration, or home after the pilot turned home (its flight is over)
             sim.endpoint.step(ev.step_s)
-            v = sim.vehicle
-            v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + origin, 0.0, 0.0, 0.0, 0.0
-            sim.endpoint.battery.swap()  # full at the mission clock's 0: the wall-paced take-off must not count
-            steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
-            progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", progress_stream)
-            next_frame = next_layers = t = 0.0
-            columns = message = None
+            steps += 1
+            t = steps * ev.step_s
+        stages.settle()
+        if self.sampler.series.last()["t"] < t:
+            self.sampler.series.append(t, self.scorer(self.map, self.gt, t))
+        progress.close(f"mapped {self.sampler.series.last()['percent_mapped']:.1f}% waypoints {len(self.records)}")
+        return t, tuple(float(c) for c in position)
 
-            def metrics(now: float) -> dict[str, float]:
-                return scorer(service.map, gt, now)
+    def _layers(self) -> None:
+        view = self.pipeline.layers(self.vehicle)
+        self.message = wire.encode_columns(view.columns, view.stamp, self.vehicle, self.mission.map_server.layers,
+                                           view.near)
+        self.columns = wire.to_column_layers(wire.decode_layer_set(self.message))
 
-            while True:
-                if t >= next_layers - 1e-9:  # the map server's layer set, through the wire codec
-                    next_layers += layer_period
-                    at = sim.endpoint.reported_pose().position - origin  # in full around the drone, as the node's
-                    message = wire.encode_columns(service.columns(), service.last_stamp, vehicle,
-                                                  mission.map_server.layers,
-                                                  service.detail(at[0], at[1], pilot.layer_reach))
-                    columns = wire.to_column_layers(wire.decode_layer_set(message))
-                position = sim.endpoint.reported_pose().position - origin  # in the map frame, as reported
-                evaluations = pilot.evaluations
-                charge = round(100 * sim.endpoint.battery.remaining) / 100  # SYS_STATUS's whole percent
-                command = pilot.step(position, t, columns, battery=charge)
-                if record_inputs and pilot.evaluations != evaluations:
-                    inputs.append(PilotInput(t, tuple(float(c) for c in position), message, command))
-                if command is not None:
-                    record = command.record()
-                    try:
-                        link.set_waypoint(*command.position, yaw=command.yaw)
-                    except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
-                        record["refused"] = str(exc)
-                        if link.refused[exc.kind] == 1:
-                            logging.getLogger("layerpilot.eval").warning("waypoint refused by the link: %s", exc)
-                    records.append(record)
-                    if view is not None:  # with the tick's A0..A3 when the maker chose it
-                        view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
-                if t >= next_frame - 1e-9:
-                    next_frame += frame_period
-                    capture = sim.capture(now=t)  # what the drone delivers; its truth is for scoring only
-                    pose, frame = capture.vehicle, capture.frame.seen_from(origin)
-                    frames += 1
-                    path.append(tuple(float(c) for c in (pose.position - origin)[:2]))
-                    if view is not None:
-                        view.frame(t, frame, pose.position - origin, service.map)
-                    if (cloud := depth.push(frame)) is not None:
-                        service.insert(cloud.points, cloud.origin, cloud.colors, t, mission.depth.max_depth)
-                    if (reference := truth.push(capture.truth.seen_from(origin))) is not None and len(reference):
-                        gt.insert(reference.points, reference.origin, reference.colors, stamp=t)
-                if sampler.maybe_sample(t, lambda: metrics(t)) and view is not None:
-                    view.metrics(t, sampler.series.last())
-                last = sampler.series.last() if len(sampler.series) else {}
-                progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(records)}")
-                if t >= ev.duration - 1e-9 or (pilot.ending and pilot.arrived(position)):
-                    break  # the duration, or home after the pilot turned home (its flight is over)
-                sim.endpoint.step(ev.step_s)
-                steps += 1
-                t = steps * ev.step_s
-            if sampler.series.last()["t"] < t:
-                sampler.series.append(t, metrics(t))
-            progress.close(f"mapped {sampler.series.last()['percent_mapped']:.1f}% waypoints {len(records)}")
-        finally:
-            link.close()
+    def _pilot_step(self, link: FlightLink, position: np.ndarray, t: float, charge: float) -> None:
+        """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence."""
+        evaluations = self.pilot.evaluations
+        command = self.pipeline.tick(self.vehicle, t, self.columns, battery=charge)
+        if self.record_inputs and self.pilot.evaluations != evaluations:
+            self.inputs.append(PilotInput(t, tuple(float(c) for c in position), self.message, command))
+        if command is None:
+            return
+        record = command.record()
+        try:
+            link.set_waypoint(*command.position, yaw=command.yaw)
+        except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
+            record["refused"] = str(exc)
+            if link.refused[exc.kind] == 1:
+                _log.warning("waypoint refused by the link: %s", exc)
+        self.records.append(record)
+        if self.view is not None:  # with the tick's A0..A3 when the maker chose it
+            self.view.decision(t, record, None if command.decision is None else self.pilot.maker.last_tick)
 
-    est = service.map
-    est.save(out / "map.ot")
-    survey.save(pilot, out / "survey.json", t, t)  # the pilot's state: `decide --resume` can go on from here
-    est.export_bt(out / "map.bt")
-    with open(out / "decisions.jsonl", "w") as f:
-        for record in records:
-            f.write(json.dumps(record, default=_json_default) + "\n")
-    final_columns = est.column_layers_for(geometry)
-    final_layers = compute_layers(final_columns, pilot.layer_context(final_columns, position, t),
-                                  pilot.behavior.layer_names, est)
-    images = dict(final_layers.layers)
-    images["elevation_m"] = final_layers.elevation_m
-    settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
-                "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending else "duration",
-                "retargets": sum(r["reason"] == "retarget" for r in records),
-                "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
-                "frames": frames, "clouds": depth.clouds,
-                **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud
-                "wall_s": round(time.monotonic() - wall0, 1)}
-    paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", sampler.series,
-                             est.column_layers_for(geometry), aoi, np.array(path).reshape(-1, 2), images, settings)
-    return MissionResult(out, sampler.series.last(), len(records), frames, depth.clouds,
-                         time.monotonic() - wall0, paths, inputs)
+    def _frame(self, t: float, frame: CameraFrame, reference: CameraFrame, position: np.ndarray,
+               stages: Stages) -> None:
+        """A camera frame: stereo and insertion on one lane, the ground-truth reference (the same exposure
+        at the true pose, with the true depth) on the other."""
+        self.frames += 1
+        self.path.append((float(position[0]), float(position[1])))
+        if self.view is not None:
+            stages.settle()  # the view reads the map
+            self.view.frame(t, frame, position, self.map)
+        max_range = self.mission.depth.max_depth
+        poses, self._telemetry = self._telemetry, []
+
+        def depth() -> None:
+            for stamp, pose in poses:
+                self.pipeline.telemetry(self.vehicle, stamp, pose)
+            if (cloud := self.pipeline.frame(self.vehicle, frame)) is not None:
+                self.pipeline.cloud(self.vehicle, cloud, max_range)
+
+        def truth() -> None:
+            if (cloud := self.truth.push(reference)) is not None and len(cloud):
+                self.gt.insert(cloud.points, cloud.origin, cloud.colors, stamp=t)
+
+        stages.submit("depth", depth)
+        stages.submit("truth", truth)
+
+    def _write(self, out: Path, link: FlightLink, t: float, position: tuple[float, float, float],
+               wall_s: float) -> MissionResult:
+        est, pilot, mission = self.map, self.pilot, self.mission
+        est.save(out / "map.ot")
+        survey.save(pilot, out / "survey.json", t, t)  # the pilot's state: `decide --resume` can go on from here
+        est.export_bt(out / "map.bt")
+        with open(out / "decisions.jsonl", "w") as f:
+            for record in self.records:
+                f.write(json.dumps(record, default=_json_default) + "\n")
+        final_columns = est.column_layers_for(self.geometry)
+        final_layers = compute_layers(final_columns, pilot.layer_context(final_columns, position, t),
+                                      pilot.behavior.layer_names, est)
+        images = dict(final_layers.layers)
+        images["elevation_m"] = final_layers.elevation_m
+        depth = self.pipeline.depth[self.vehicle]
+        records = self.records
+        settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
+                    "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending
+                    else "duration",
+                    "retargets": sum(r["reason"] == "retarget" for r in records),
+                    "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
+                    "frames": self.frames, "clouds": depth.clouds,
+                    **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud
+                    "wall_s": round(wall_s, 1), "real_time_factor": round(t / max(wall_s, 1e-9), 1)}
+        paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", self.sampler.series,
+                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings)
+        return MissionResult(out, self.sampler.series.last(), len(records), self.frames, depth.clouds, wall_s, paths,
+                             self.inputs)
+
+
+def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
+                record_inputs: bool = False, view=None, overlap: bool | None = None) -> MissionResult:
+    """Fly the mission's first vehicle in lock-step and write the run directory (see ``LockstepMission``)."""
+    return LockstepMission(mission, progress_stream, record_inputs=record_inputs, view=view,
+                           overlap=overlap).run(run_dir)

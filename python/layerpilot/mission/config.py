@@ -60,6 +60,7 @@ class EvaluationSettings:
     behaviors: list[str] = field(default_factory=lambda: ["balanced", "exploration", "time", "distance",
                                                           "lawnmower", "orbit"])  # a study's behaviors
     out: str = "runs"  # parent directory of run directories
+    overlap: bool = True  # run a frame's stereo and the truth beside the simulator (results identical to False)
 
     def __post_init__(self) -> None:
         check_range("evaluation.duration", self.duration, 1.0, 36_000.0)

@@ -4,8 +4,8 @@ The pattern of ETH's wavemap (one ``Pipeline``, driven by its ROS server and its
 alike): the live nodes, the lock-step evaluator and replay all hold a ``MissionPipeline`` and
 call it; none of them wires the steps together by hand. A driver feeds it what arrives:
 
-- ``pose(vehicle, stamp, pose)``: the vehicle's telemetry (the pilot's position, the centre of its
-  layer set, the depth service's pose stream);
+- ``pose(vehicle, stamp, pose)``: the vehicle's newest pose (the pilot's position, the centre of its
+  layer set), and ``telemetry(...)``, the same stream for the depth service;
 - ``frame(vehicle, frame)``: a camera frame -> the map-frame point cloud, or None;
 - ``cloud(vehicle, cloud, max_range)``: a cloud into the fused map;
 - ``layers(vehicle)``: the column layers the map publishes for that vehicle (full around it);
@@ -85,14 +85,20 @@ class MissionPipeline:
     # --- inputs ---------------------------------------------------------------------------
 
     def pose(self, vehicle: str, stamp: float, pose: Pose) -> None:
-        """A vehicle's telemetry (map frame, mission clock): where its layer set is centred, and the
-        depth service's pose stream. Any mission vehicle's pose is kept (the map serves every one)."""
+        """A vehicle's newest pose (map frame, mission clock): where the pilot is, where its layer set is
+        centred. Any mission vehicle's pose is kept (the map serves every one)."""
         self._check(vehicle, self.mission.vehicles)
         p = np.asarray(pose.position, float)
         if p.shape != (3,) or not np.all(np.isfinite(p)) or not math.isfinite(stamp):
             raise ValueError(f"pose of {vehicle}: position and stamp must be finite, got {p} at {stamp}")
         self._where[vehicle] = (float(p[0]), float(p[1]), float(p[2]))
-        if vehicle in self.depth and hasattr(self.depth[vehicle], "push_pose"):
+
+    def telemetry(self, vehicle: str, stamp: float, pose: Pose) -> None:
+        """The vehicle's pose stream for its depth service (poses at the frames' times, the camera clock's
+        offset). Apart from ``pose``: a driver that runs the depth step on a worker feeds it there, in order."""
+        self._need("depth")
+        self._check(vehicle, self.depth)
+        if hasattr(self.depth[vehicle], "push_pose"):
             self.depth[vehicle].push_pose(stamp, pose)
 
     def frame(self, vehicle: str, frame: CameraFrame) -> PointCloud | None:
