@@ -199,8 +199,8 @@ class MavlinkVehicle:
         self.messages_received = 0
         self.mission = MissionStore(self._mav)  # the mission protocol's vehicle side (upload, download)
         self._auto: AutoMission | None = None    # the stored mission's run in AUTO (ArduPilot flavour)
-        sensors = self.config.sensors
-        self.estimator = None if sensors.exact_pose else Estimator(sensors, self.config.seed)
+        self.estimator = Estimator(self.config.sensors, self.config.seed)
+        self._exact_pose = self.config.sensors.exact_pose
 
     # --- public API ------------------------------------------------------------------
     @property
@@ -221,14 +221,13 @@ class MavlinkVehicle:
     def reported_pose(self) -> VehiclePose:
         """The state the autopilot reports (its EKF's estimate): :meth:`pose` plus the sensors' errors."""
         with self._lock:
-            return self.pose() if self.estimator is None else self.estimator.report(self.pose())
+            return self.pose() if self._exact_pose else self.estimator.report(self.pose())
 
     def reported_pose_at(self, t: float) -> VehiclePose:
         """The reported state at mission time ``t`` (within the last few seconds), interpolated between reports."""
         with self._lock:
-            if self.estimator is None or (pose := self.estimator.at(t)) is None:
-                return self.pose()
-            return pose
+            pose = self.estimator.at(t)
+            return self.pose() if pose is None else pose
 
     def pause_output(self) -> None:
         """Stop sending anything (the vehicle keeps flying and listening): a link loss seen from outside."""
@@ -270,11 +269,10 @@ class MavlinkVehicle:
             self.time += dt
             self._update_modes()
             self.vehicle.step(dt)
-            if self.estimator is not None:
-                drift = self.estimator.errors.current.drift
-                self.estimator.step(dt, self.pose())
-                if self._airborne:  # in the air it flies its estimate; on the ground it stays put
-                    self.vehicle.shift_target(drift - self.estimator.errors.current.drift)
+            drift = self.estimator.errors.current.drift
+            self.estimator.step(dt, self.pose())
+            if self._airborne and not self._exact_pose:  # in the air it flies its estimate; on the ground it stays
+                self.vehicle.shift_target(drift - self.estimator.errors.current.drift)
             self._after_motion(dt)
             self._send_due()
 
@@ -585,7 +583,7 @@ class MavlinkVehicle:
 
     def _true_target(self, position: tuple) -> tuple:
         """Where the vehicle goes for a target in its estimated frame: the target minus the EKF's drift."""
-        if self.estimator is None:
+        if self._exact_pose:
             return position
         return tuple(float(c) for c in np.subtract(position, self.estimator.errors.current.drift))
 
@@ -762,7 +760,7 @@ class MavlinkVehicle:
 
     def _send_gps_raw_int(self) -> None:
         """The receiver's own fix: its error without the EKF's (no barometer, no white noise smoothing)."""
-        gnss = 0.0 if self.estimator is None else self.estimator.errors.current.gnss
+        gnss = 0.0 if self._exact_pose else self.estimator.errors.current.gnss
         lat, lon, alt = self._geodetic(self.vehicle.position + gnss)
         v = self.vehicle.velocity
         fix = mav.GPS_FIX_TYPE_3D_FIX if self._has_fix() else mav.GPS_FIX_TYPE_NO_FIX

@@ -129,23 +129,25 @@ PROFILES: dict[str, SensorProfile] = {
 }
 
 
-def sensor_profile(name: str, overrides: dict[str, Any] | None = None) -> SensorProfile:
-    """Preset ``name`` with single fields replaced; an unknown name, key or bad value is an error naming it."""
+def sensor_profile(name: str, overrides: dict[str, Any] | None = None, prefix: str = "") -> SensorProfile:
+    """Preset ``name`` with single fields replaced; an unknown name, key or bad value is an error naming it
+    (``<prefix>sensors``, ``<prefix>sensor_overrides.<key>``)."""
+    where = f"{prefix}sensor_overrides"
     if name not in PROFILES:
-        raise ConfigError(f"sensors: expected one of {', '.join(map(repr, PROFILES))}, got {name!r}")
+        raise ConfigError(f"{prefix}sensors: expected one of {', '.join(map(repr, PROFILES))}, got {name!r}")
     overrides = dict(overrides or {})
     hints = typing.get_type_hints(SensorProfile)
     fields = [f.name for f in dataclasses.fields(SensorProfile)]
     unknown = sorted(set(overrides) - set(fields))
     if unknown:
-        raise ConfigError(f"unknown key(s) {', '.join('sensor_overrides.' + k for k in unknown)}; "
+        raise ConfigError(f"unknown key(s) {', '.join(f'{where}.{k}' for k in unknown)}; "
                           f"allowed: {', '.join(fields)}")
     for key, value in overrides.items():
         if hints[key] is int:
             if float(value) != int(value):
-                raise ConfigError(f"sensor_overrides.{key}: expected a whole number, got {value!r}")
+                raise ConfigError(f"{where}.{key}: expected a whole number, got {value!r}")
             overrides[key] = int(value)
     try:
         return dataclasses.replace(PROFILES[name], **overrides)
     except ConfigError as exc:
-        raise ConfigError(f"sensor_overrides.{exc}") from None
+        raise ConfigError(f"{where}.{exc}") from None

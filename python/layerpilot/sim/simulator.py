@@ -55,7 +55,7 @@ class SimConfig:
     sensor_overrides: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        sensor_profile(self.sensors, self.sensor_overrides)  # an unknown name or key is an error here
+        sensor_profile(self.sensors, self.sensor_overrides, "sim.")  # an unknown name or key is an error here
         check_range("frame_rate_hz", self.frame_rate_hz, 0.01, 100.0)
         check_range("step_s", self.step_s, 1e-4, 0.5)
         if self.flavour not in ("ardupilot", "px4"):
@@ -139,8 +139,8 @@ class Simulator:
             return Capture(frame, frame, vehicle)
         pitch = self.config.camera.pitch_deg
         nominal = camera_pose(vehicle.position, vehicle.yaw, pitch)
-        error = self.endpoint.estimator.errors.current if self.endpoint.estimator is not None else None
-        if error is not None:  # the gimbal levels the camera on the EKF's horizon: the truth tilts by its error
+        error = self.endpoint.estimator.errors.current
+        if not self.sensors.exact_pose:  # the gimbal levels the camera on the EKF's horizon: the truth tilts
             tilt = _tilt(error.roll, error.pitch, vehicle.yaw).T
             nominal = Pose.from_rotation(tilt @ nominal.rotation, nominal.position)
         truth = self.renderer.render(nominal, now)
