@@ -214,11 +214,13 @@ def decode_layer(m: pb.Layer, shape: tuple[int, int]) -> np.ndarray:
     return arr
 
 
-def decode_layer_set(payload: bytes) -> GridLayersMessage:
+def decode_layer_set(payload: bytes, *, max_cells: int = limits.MAX_LAYER_CELLS) -> GridLayersMessage:
+    """``max_cells``: the reader's own cap on the grid (at most the bus's), checked before any layer is decoded."""
     m = parse(pb.LayerSet, payload)
     g = m.grid
-    if g.width * g.height > limits.MAX_LAYER_CELLS:
-        raise BadMessage("too large", f"grid: {g.width}x{g.height} cells is more than {limits.MAX_LAYER_CELLS}")
+    cap = min(max_cells, limits.MAX_LAYER_CELLS)
+    if g.width * g.height > cap:
+        raise BadMessage("too large", f"grid: {g.width}x{g.height} cells is more than {cap}")
     if len(m.layers) > limits.MAX_LAYERS:
         raise BadMessage("too large", f"layers: {len(m.layers)} is more than {limits.MAX_LAYERS}")
     if not limits.MIN_RESOLUTION <= g.resolution <= limits.MAX_RESOLUTION:

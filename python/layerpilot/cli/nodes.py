@@ -228,7 +228,7 @@ def _map_server(args, mission, vehicle, session) -> Running:
     return Running(lambda: {"received": q.received, "inserted": svc.clouds_inserted, "dropped": q.dropped,
                             "rejected": node.rejects.total, "layer_sets": node.layer_sets_published,
                             "queries": node.queries_answered, "snapshots": node.snapshots_written,
-                            "leaves": node.map.stats()["leaves"]},
+                            "leaves": node.map.stats()["leaves"], "outside": svc.points_outside},
                    node.stop, {"snapshot": node.cfg.snapshot}, supervisor=node.supervisor)
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from layerpilot.depth.config import DepthConfig
 from layerpilot.depth.backproject import camera_points_to_cloud
+from layerpilot.depth.downscale import MAX_WIDTH, limit_pixels
 from layerpilot.depth.picking import FramePicker
 from layerpilot.depth.stereo import StereoMatcher
 from layerpilot.geometry import CameraFrame, PointCloud
@@ -27,14 +28,20 @@ class DepthSource(Protocol):
 
 
 class StereoDepth:
-    """Two-view stereo: pick a partner for each new frame, match, filter, publish."""
+    """Two-view stereo: pick a partner for each new frame, match, filter, publish.
+
+    Frames wider than ``max_width`` are downscaled to it first (``depth.downscale``): what a
+    pair costs is bounded whatever the camera sends, and the picker's history holds small frames.
+    """
 
     def __init__(self, config: DepthConfig = DepthConfig(),
-                 scene_depth: Callable[[CameraFrame], float] | None = None) -> None:
+                 scene_depth: Callable[[CameraFrame], float] | None = None, max_width: int = MAX_WIDTH) -> None:
         self.picker = FramePicker(config.pick, scene_depth)
         self.matcher = StereoMatcher(config.match)
+        self.max_width = max_width
 
     def push(self, frame: CameraFrame) -> PointCloud | None:
+        frame = limit_pixels(frame, self.max_width)
         pick = self.picker.push(frame)
         if pick.partner is None:
             return None

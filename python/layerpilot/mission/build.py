@@ -9,6 +9,7 @@ from layerpilot.mission import flight
 from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.config import Mission
 from layerpilot.mission.depth_service import DepthService, stereo_preset
+from layerpilot.mission.map_service import Volume
 from layerpilot.mission.pilot import Pilot, load_pilot_behavior
 
 
@@ -56,3 +57,22 @@ def geofence_for(mission: Mission) -> Geofence:
     if area.shape == "polygon":
         return Geofence.polygon_of(area.polygon, **limits)
     return Geofence.circle(area.center if area.center is not None else mission.decide.home, area.radius, **limits)
+
+
+HOME_HEIGHT_SPAN = 1000.0  # m: home (the ground the fence's heights count from) within this of the map's z = 0
+
+
+def map_volume(mission: Mission) -> Volume:
+    """Where the mission's clouds may reach: the geofence's bounding box with its margin, widened on
+    every side by the map server's ``max_range`` (what a drone at the fence's edge can see); heights up
+    to the fence's ``alt_max`` above a home within ``HOME_HEIGHT_SPAN`` of z = 0, widened the same way."""
+    fence, reach = geofence_for(mission), mission.map_server.max_range
+    if fence.shape == "circle":
+        (cx, cy), r = fence.center, fence.radius
+        xmin, xmax, ymin, ymax = cx - r, cx + r, cy - r, cy + r
+    else:
+        xs, ys = zip(*fence.polygon)
+        xmin, xmax, ymin, ymax = min(xs), max(xs), min(ys), max(ys)
+    out = fence.margin + reach
+    return Volume((xmin - out, ymin - out, -HOME_HEIGHT_SPAN - reach),
+                  (xmax + out, ymax + out, HOME_HEIGHT_SPAN + fence.alt_max + reach))

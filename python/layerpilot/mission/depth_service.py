@@ -12,6 +12,7 @@ from typing import Literal
 
 from layerpilot.config import check_range
 from layerpilot.depth.config import DepthConfig, preset_for
+from layerpilot.depth.downscale import processing_intrinsics
 from layerpilot.geometry import CameraFrame, PointCloud
 from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth
 
@@ -49,8 +50,9 @@ class DepthService:
 
     def push(self, frame: CameraFrame) -> PointCloud | None:
         """The frame's cloud, or None (no partner yet, skipped, or no points)."""
-        if self.source is None:  # stereo presets depend on the image size: chosen on the first frame
-            self.source = StereoDepth(stereo_preset(frame.size[0], frame.intrinsics.fx))
+        if self.source is None:  # stereo presets depend on the size matched at: chosen on the first frame
+            k = processing_intrinsics(frame.intrinsics)
+            self.source = StereoDepth(stereo_preset(k.width, k.fx))
         self.frames += 1
         cloud = self.source.push(frame)
         if cloud is None or len(cloud) == 0:

@@ -3,6 +3,11 @@
 Transport-free: the map server node decodes clouds and queries and calls it; the lock-step
 evaluator calls it directly. Every request is checked before anything is allocated, so a
 query for a window at x = 1e300 is a ``ValueError`` naming ``x``, not an overflow.
+
+What a cloud may cost is bounded before it is inserted: its rays are at most the service's
+``max_range`` long (a cloud's own value only lowers it), points outside the mission's
+``Volume`` are dropped and counted, a cloud whose rays would take more than ``MAX_RAY_STEPS``
+voxel steps is refused, and so is every cloud once the map holds ``max_map_mb``.
 """
 
 from __future__ import annotations
@@ -10,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +31,8 @@ _log = logging.getLogger("layerpilot.map_server")
 COLUMN_LAYERS = ("observed", "elevation", "color", "last_seen", "min_distance")
 MAX_WINDOW = 2048  # cells per side of a layer window
 MAX_BOX = 512  # voxels per side of a voxel box
+MAP_SIZE_EVERY = 2.0  # s between looks at the map's size (a look walks the tree: 80 ms at 3.6 M leaves)
+MAX_RAY_STEPS = 1 << 27  # voxel steps of one cloud's rays (sum of ray lengths / resolution): about 2 s of insert
 
 
 @dataclass(frozen=True)
@@ -40,7 +48,8 @@ class MapServiceConfig:
     snapshot_period: float = 30.0  # s (mission time)
     snapshot_keep: int = 3  # good snapshots kept (newest first)
     queue_size: int = 8  # clouds waiting for insertion; the oldest is dropped beyond
-    max_range: float = 100.0  # m, for clouds that do not say
+    max_range: float = 100.0  # m: the longest ray the map takes; a cloud's own max_range only lowers it
+    max_map_mb: float = 512.0  # MB of map (octree, attributes, column index): clouds are refused beyond
     query_threads: int = 2
     max_voxels: int = 100_000  # voxels per voxel-query reply; more come in pages
 
@@ -53,12 +62,37 @@ class MapServiceConfig:
         check_range("map_server.max_range", self.max_range, 0.1, 10_000.0)
         check_range("map_server.query_threads", self.query_threads, 1, 64)
         check_range("map_server.max_voxels", self.max_voxels, 1, 10_000_000)
+        check_range("map_server.max_map_mb", self.max_map_mb, 1.0, 1_000_000.0)
         check_range("map_server.detail_margin", self.detail_margin, 0.0, 10_000.0)
         check_range("map_server.window width", self.window[2], 1, MAX_WINDOW)
         check_range("map_server.window height", self.window[3], 1, MAX_WINDOW)
         if not set(self.layers) <= set(COLUMN_LAYERS):
             raise ValueError(f"map_server.layers: unknown {sorted(set(self.layers) - set(COLUMN_LAYERS))}; "
                              f"known: {', '.join(COLUMN_LAYERS)}")
+
+
+class CloudRefused(ValueError):
+    """A cloud the map does not take; ``kind`` names why (counted per kind by the node)."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class Volume:
+    """The box of the map frame that clouds may reach: the mission's area widened by the sensor range."""
+
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(a) and math.isfinite(b) and a < b for a, b in zip(self.lo, self.hi)):
+            raise ValueError(f"volume: need finite lo < hi on every axis, got {self.lo} .. {self.hi}")
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """A bool per point (N, 3): within the box."""
+        return np.all((points >= np.asarray(self.lo, np.float32)) & (points <= np.asarray(self.hi, np.float32)), axis=1)
 
 
 @dataclass(frozen=True)
@@ -71,30 +105,74 @@ class VoxelPage:
 class MapService:
     """Insert clouds, answer layer windows and voxel boxes, decide when to snapshot."""
 
-    def __init__(self, cfg: MapServiceConfig, voxel_map: VoxelMap | None = None) -> None:
+    def __init__(self, cfg: MapServiceConfig, voxel_map: VoxelMap | None = None, volume: Volume | None = None) -> None:
+        """``volume``: where clouds may reach (``mission.build.map_volume``); None = anywhere (tests, tools)."""
         self.cfg = cfg
+        self.volume = volume
         self.map = voxel_map if voxel_map is not None else VoxelMap(cfg.resolution)
         if not np.isclose(self.map.resolution, cfg.resolution):
             raise ValueError(f"map resolution {self.map.resolution} != map_server.resolution {cfg.resolution}")
         self.clouds_inserted = 0
         self.points_inserted = 0
+        self.points_outside = 0  # dropped: outside the volume
         self.last_stamp = 0.0  # newest mission-clock stamp inserted (stamps the layer sets)
         self._lock = threading.Lock()
         self._dirty = False
         self._last_snapshot = -math.inf
+        self._map_bytes = (0, -math.inf)  # (total bytes, monotonic time looked at)
 
     def insert(self, points: np.ndarray, origin: np.ndarray, colors: np.ndarray | None, stamp: float,
                max_range: float | None = None) -> InsertResult:
-        """One cloud into the map (ValueError names a bad argument; the map is then unchanged)."""
+        """One cloud into the map, its rays at most min(``max_range``, the service's) long.
+
+        ValueError names a bad argument, ``CloudRefused`` a cloud over a cost limit; the map is then unchanged.
+        """
         if not math.isfinite(stamp):
             raise ValueError(f"stamp: must be finite, got {stamp}")
-        result = self.map.insert(points, origin, colors, stamp=stamp, max_range=max_range or self.cfg.max_range)
+        ray = min(max_range, self.cfg.max_range) if max_range else self.cfg.max_range
+        points, origin = np.asarray(points, np.float32), np.asarray(origin, np.float64)
+        if points.ndim != 2 or points.shape[1:] != (3,) or origin.shape != (3,):
+            raise ValueError(f"points, origin: expected shapes (N, 3) and (3,), got {points.shape} and {origin.shape}")
+        points, colors = self._within_volume(points, origin, colors)
+        # a NaN point counts as a whole ray (fmin): the bound holds whatever the map then drops
+        steps = float(np.fmin(np.linalg.norm(points - origin, axis=1), ray).sum()) / self.map.resolution
+        if steps > MAX_RAY_STEPS:
+            raise CloudRefused("too costly", f"{len(points)} rays of up to {ray:g} m are {steps:.3g} voxel steps, "
+                                             f"more than {MAX_RAY_STEPS}")
+        if (used := self.map_bytes()) >= self.cfg.max_map_mb * 1e6:
+            raise CloudRefused("map full", f"the map holds {used / 1e6:.0f} MB, "
+                                           f"map_server.max_map_mb = {self.cfg.max_map_mb:g}")
+        return self._count(self.map.insert(points, origin, colors, stamp=stamp, max_range=ray), stamp)
+
+    def map_bytes(self) -> int:
+        """The map's memory (``VoxelMap.stats()["total_bytes"]``), looked at every ``MAP_SIZE_EVERY`` s at most."""
+        used, when = self._map_bytes
+        if time.monotonic() - when >= MAP_SIZE_EVERY:
+            self._map_bytes = used, when = self.map.stats()["total_bytes"], time.monotonic()
+        return used
+
+    def _count(self, result: InsertResult, stamp: float) -> InsertResult:
         with self._lock:
             self.clouds_inserted += 1
             self.points_inserted += result.points_used
             self.last_stamp = max(self.last_stamp, stamp)
             self._dirty = True
         return result
+
+    def _within_volume(self, points: np.ndarray, origin: np.ndarray,
+                       colors: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The points inside the volume (the rest counted in ``points_outside``); an origin outside is refused."""
+        if self.volume is None:
+            return points, colors
+        if not self.volume.inside(origin.reshape(1, 3).astype(np.float32))[0]:
+            raise CloudRefused("outside the area", f"origin {origin.tolist()} is outside the mission's volume "
+                                                   f"{self.volume.lo} .. {self.volume.hi}")
+        keep = self.volume.inside(points)
+        if keep.all():
+            return points, colors
+        with self._lock:
+            self.points_outside += int(len(keep) - keep.sum())
+        return points[keep], None if colors is None else np.asarray(colors)[keep]
 
     def columns(self, x: float | None = None, y: float | None = None, w: int | None = None,
                 h: int | None = None) -> ColumnLayers:
@@ -158,16 +236,16 @@ class MapService:
         return SnapshotStore(Path(self.cfg.snapshot), self.cfg.snapshot_keep).save(self.map)
 
     @classmethod
-    def start(cls, cfg: MapServiceConfig) -> "MapService":
+    def start(cls, cfg: MapServiceConfig, volume: Volume | None = None) -> "MapService":
         """The service on the newest good snapshot, or on an empty map (damage is logged, never fatal)."""
         if not cfg.snapshot:
-            return cls(cfg)
+            return cls(cfg, volume=volume)
         from layerpilot.map.snapshots import SnapshotStore
 
         m, events = SnapshotStore(Path(cfg.snapshot), cfg.snapshot_keep).load_newest_good(cfg.resolution)
         if m is None:
             if Path(cfg.snapshot).exists() or events:
                 _log.error("no good snapshot at %s: starting with an empty map", cfg.snapshot)
-            return cls(cfg)
+            return cls(cfg, volume=volume)
         _log.info("reloaded snapshot %s (%d leaves)", cfg.snapshot, m.stats()["leaves"])
-        return cls(cfg, m)
+        return cls(cfg, m, volume)

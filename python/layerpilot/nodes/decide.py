@@ -16,6 +16,7 @@ keeps a reference to the tick's arrays; nothing is multiplied out or encoded unl
 from __future__ import annotations
 
 import logging
+import functools
 import math
 import threading
 import time
@@ -114,6 +115,9 @@ class DecideNode:
                          f", ended: {self.pilot.ending}" if self.pilot.ending else "")
         self.rejects = Rejects(_log)
         self.supervisor = supervisor or Supervisor(_log)
+        # a layer set is the map server's configured window: a larger grid is refused before it is decoded
+        _, _, w, h = mission.map_server.window
+        self._decode_layers = functools.partial(decode_layer_set, max_cells=int(w) * int(h))
         self._columns: ColumnLayers | None = None
         self._state: State | None = None
         self._fresh = False  # a new layer set or pose since the last step
@@ -140,7 +144,7 @@ class DecideNode:
     def start(self) -> None:
         s, k, r, sv = self.session, self.keys, self.rejects, self.supervisor
         self._decls = [
-            s.declare_subscriber(k.layers, guarded(decode_layer_set, self._on_layers, r, sv)),
+            s.declare_subscriber(k.layers, guarded(self._decode_layers, self._on_layers, r, sv)),
             s.declare_subscriber(k.pose, guarded(decode_state, self._on_state, r, sv)),
             s.declare_subscriber(keys.all_vehicles("decision"), guarded(decode_decision, self._on_other, r, sv)),
             s.declare_queryable(k.aggregates, self._on_aggregates),

@@ -1,7 +1,9 @@
 """The map server node: the mission's MapService on the bus, one fused map for every vehicle.
 
 Clouds from ``layerpilot/<vehicle>/cloud`` (the mission's vehicles only) are decoded on
-Zenoh's thread and queued; one worker inserts them (the C++ insert releases the GIL). The
+Zenoh's thread and queued; one worker inserts them (the C++ insert releases the GIL), within
+the service's cost limits: rays of at most ``map_server.max_range``, points inside the
+mission's volume (``mission.build.map_volume``), a map of at most ``max_map_mb``. The
 queue is bounded: when clouds come faster than they can be inserted the oldest is dropped
 and counted. Layer sets are published at a fixed rate, each in full only around its vehicle's
 newest pose (its home before the first; ``MapService.detail``), so a square-kilometre area
@@ -28,9 +30,9 @@ from layerpilot.bus.messages import CloudMessage, State, decode_cloud, decode_st
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
-from layerpilot.mission.build import build_pilot
+from layerpilot.mission.build import build_pilot, map_volume
 from layerpilot.mission.config import Mission
-from layerpilot.mission.map_service import COLUMN_LAYERS, MapService
+from layerpilot.mission.map_service import COLUMN_LAYERS, CloudRefused, MapService
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.supervise import Supervisor
 
@@ -48,7 +50,7 @@ class MapServer:
         self.vehicles = tuple(mission.vehicles)
         self.rejects = Rejects(_log)
         self.queue: DropOldest[CloudMessage] = DropOldest(self.cfg.queue_size)
-        self.service = MapService.start(self.cfg)
+        self.service = MapService.start(self.cfg, map_volume(mission))  # clouds reach the mission's area only
         self.layer_sets_published = 0
         self.queries_answered = 0
         self.snapshots_written = 0
@@ -112,8 +114,9 @@ class MapServer:
         c = message.cloud
         try:
             self.service.insert(c.points, c.origin, c.colors, c.stamp, message.max_range or None)
-        except ValueError as exc:  # the cloud's fault (shape, NaN origin): rejected with the reason
-            self.rejects.reject(f"{keys.PREFIX}/{message.vehicle}/cloud", BadMessage("insert failed", str(exc)))
+        except ValueError as exc:  # the cloud's fault (shape, NaN origin, a cost limit): rejected with the reason
+            kind = exc.kind if isinstance(exc, CloudRefused) else "insert failed"
+            self.rejects.reject(f"{keys.PREFIX}/{message.vehicle}/cloud", BadMessage(kind, str(exc)))
         return True
 
     # --- layer sets -----------------------------------------------------------------------
