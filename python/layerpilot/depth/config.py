@@ -46,7 +46,7 @@ class MatchConfig:
     uniqueness_ratio: int = 10  # percent
     speckle_window: int = 100  # pixels at matching scale
     speckle_range: int = 2  # disparity units (OpenCV multiplies by 16)
-    lr_max_diff: float = 1.0  # left-right consistency tolerance in pixels
+    lr_max_diff: float = 1.0  # left-right consistency tolerance in pixels (rounded up: SGBM checks whole pixels)
     min_texture: float = 1.0  # grey-level standard deviation in the block around a pixel (0 = off)
     max_disparity_step: float = 1.0  # drop pixels whose 3x3 neighbourhood spans more (0 = off)
     edge_margin: int = 8  # pixels dropped along the border of the valid rectified area
@@ -70,6 +70,77 @@ class MatchConfig:
         check_range("max_disparity_step", self.max_disparity_step, 0.0)
         check_range("edge_margin", self.edge_margin, 0)
         check_range("max_depth", self.max_depth, self.min_depth)
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Relative pose from the images (see docs/photos.md, "Pose refinement", and docs/depth.md, "Pose refinement")."""
+
+    detector: str = "sift"  # "sift": keypoints matched by descriptor; "klt": corners of the partner tracked by optical flow
+    scale: float = 1.0  # images are resized by this before features are found (pixels come back at full size)
+    features: int = 8000  # SIFT keypoints / KLT corners per image at the working scale
+    ratio: float = 0.9  # Lowe's ratio test
+    ransac_px: float = 1.0  # essential-matrix RANSAC threshold, pixels at the working scale
+    min_inliers: int = 60
+    min_inlier_ratio: float = 0.35  # RANSAC inliers / ratio-test matches; below it the geometry is a guess
+    max_rotation_deg: float = 5.0  # images and GNSS/attitude may disagree by this much ...
+    max_direction_deg: float = 25.0  # ... and the baseline directions by this much
+    flip_heading: bool = True  # a baseline direction off by 180 +- max_direction_deg: the heading is, correct it
+    polish: bool = False  # refine RANSAC's pose on all its inliers (robust Sampson error; docs/depth.md: the live
+    # default, 2-5x smaller errors on rendered frames; on the nadir photos with their uncorrected lens it drifts)
+
+    def __post_init__(self) -> None:
+        if self.detector not in ("sift", "klt"):
+            raise ConfigError(f"detector = {self.detector!r}: expected sift or klt")
+        check_range("scale", self.scale, 0.1, 1.0)
+        check_range("features", self.features, 100)
+        check_range("ratio", self.ratio, 0.1, 1.0)
+        check_range("ransac_px", self.ransac_px, 0.1)
+        check_range("min_inliers", self.min_inliers, 8)
+        check_range("min_inlier_ratio", self.min_inlier_ratio, 0.0, 1.0)
+        check_range("max_rotation_deg", self.max_rotation_deg, 0.0, 90.0)
+        check_range("max_direction_deg", self.max_direction_deg, 0.0, 180.0)
+
+
+@dataclass(frozen=True)
+class AdjustConfig:
+    """Bundle adjustment of all photos (see docs/photos.md, "Bundle adjustment")."""
+
+    overlap_ratio: float = 1.0  # photos whose centres are within this x the flying height are matched
+    guide_px: float = 25.0  # matches farther from the GNSS/attitude epipolar line are dropped (0: off)
+    ransac_px: float = 1.0  # essential-matrix RANSAC threshold per pair, pixels at the working scale
+    min_inliers: int = 40
+    min_inlier_ratio: float = 0.1  # tracks through three and more photos reject the remaining outliers
+    max_rotation_deg: float = 10.0  # a pair whose images disagree more with the attitudes is not linked
+    max_direction_deg: float = 30.0
+    min_track: int = 3  # photos a track must be seen in (two-view tracks only add noise)
+    pixel_sigma: float = 1.0  # reprojection error scale, pixels at the working scale
+    gnss_sigma_h: float = 0.5  # GNSS position prior, metres
+    gnss_sigma_v: float = 0.2  # GPS altitude follows the barometric height within 0.1 m
+    tilt_sigma_deg: float = 1.0  # attitude prior on the camera's tilt (the stabilised gimbal's pitch and roll)
+    yaw_sigma_deg: float = 10.0  # ... and on its heading (after the heading vote; the compass is poor)
+    focal_sigma: float = 0.0  # > 0: also fit one focal-length factor with this prior sigma
+    distortion_sigma: float = 0.2  # > 0: also fit radial distortion k1, k2 (prior 0 with this sigma)
+    loss: str = "soft_l1"
+    loss_scale: float = 2.0  # residuals (in sigmas) beyond this are down-weighted
+    max_evaluations: int = 60
+
+    def __post_init__(self) -> None:
+        check_range("overlap_ratio", self.overlap_ratio, 0.0)
+        check_range("guide_px", self.guide_px, 0.0)
+        check_range("ransac_px", self.ransac_px, 0.1)
+        check_range("min_inliers", self.min_inliers, 8)
+        check_range("min_inlier_ratio", self.min_inlier_ratio, 0.0, 1.0)
+        check_range("max_rotation_deg", self.max_rotation_deg, 0.0, 180.0)
+        check_range("max_direction_deg", self.max_direction_deg, 0.0, 180.0)
+        check_range("min_track", self.min_track, 2)
+        for name in ("pixel_sigma", "gnss_sigma_h", "gnss_sigma_v", "tilt_sigma_deg", "yaw_sigma_deg", "loss_scale"):
+            check_range(name, getattr(self, name), 1e-6)
+        check_range("focal_sigma", self.focal_sigma, 0.0)
+        check_range("distortion_sigma", self.distortion_sigma, 0.0)
+        check_range("max_evaluations", self.max_evaluations, 1)
+        if self.loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
+            raise ValueError(f"loss: {self.loss!r} is not one of linear, soft_l1, huber, cauchy, arctan")
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ import numpy as np
 from layerpilot.depth.config import DepthConfig
 from layerpilot.depth.backproject import camera_points_to_cloud
 from layerpilot.depth.downscale import MAX_WIDTH, limit_pixels
+from layerpilot.depth.live import LiveRefiner
 from layerpilot.depth.picking import FramePicker
 from layerpilot.depth.stereo import StereoMatcher
 from layerpilot.geometry import CameraFrame, PointCloud
@@ -35,21 +36,30 @@ class StereoDepth:
     """
 
     def __init__(self, config: DepthConfig = DepthConfig(),
-                 scene_depth: Callable[[CameraFrame], float] | None = None, max_width: int = MAX_WIDTH) -> None:
+                 scene_depth: Callable[[CameraFrame], float] | None = None, max_width: int = MAX_WIDTH,
+                 refiner: LiveRefiner | None = None) -> None:
         self.picker = FramePicker(config.pick, scene_depth)
         self.matcher = StereoMatcher(config.match)
         self.max_width = max_width
+        self.refiner = refiner  # None: the frames' poses are used as they come
 
     def push(self, frame: CameraFrame) -> PointCloud | None:
         frame = limit_pixels(frame, self.max_width)
         pick = self.picker.push(frame)
         if pick.partner is None:
             return None
-        cloud, _ = self.matcher.cloud(frame, pick.partner)
+        ref, partner = frame, pick.partner
+        if self.refiner is not None:
+            if (refined := self.refiner.refine(frame, partner)) is None:
+                return None  # the reason is counted in the refiner's stats
+            ref, partner = refined
+        cloud, _ = self.matcher.cloud(ref, partner)
         return cloud
 
-    def stats(self) -> dict[str, int]:
-        return {"pairs": self.picker.pairs, **{f"skipped_{k}": v for k, v in sorted(self.picker.skipped.items())}}
+    def stats(self) -> dict[str, float]:
+        refined = self.refiner.stats() if self.refiner is not None else {}
+        return {"pairs": self.picker.pairs, **{f"skipped_{k}": v for k, v in sorted(self.picker.skipped.items())},
+                **refined}
 
 
 class GroundTruthDepth:

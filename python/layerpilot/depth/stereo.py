@@ -1,9 +1,10 @@
 """Semi-global matching and the filters that keep only trustworthy depths.
 
 OpenCV's StereoSGBM matches the canonical pair (see ``rectify``); its own
-uniqueness and speckle filters run inside. Around it: an explicit left-right
-consistency check (the right-view disparity comes from matching the mirrored
-pair), an edge margin around the valid rectified area of both images, and a
+uniqueness, speckle and left-right consistency filters run inside (``disp12MaxDiff``
+= ``lr_max_diff``: the right view's disparities come from the same cost volume, where
+matching the mirrored pair again cost a second SGBM call). Around it: an edge
+margin around the valid rectified area of both images, and a
 depth window ``[min_depth, max_depth]`` (100 m by default). Survivors are
 triangulated, ``Z = f * B / d``, and moved into the map frame.
 """
@@ -12,6 +13,8 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+
+import math
 
 import cv2
 import numpy as np
@@ -41,29 +44,20 @@ class StereoMatcher:
     def __init__(self, config: MatchConfig = MatchConfig()) -> None:
         self.config = config
         c = config
-        self._sgbm = cv2.StereoSGBM_create(
-            minDisparity=0, numDisparities=c.num_disparities, blockSize=c.block_size,
-            P1=8 * c.block_size ** 2, P2=32 * c.block_size ** 2, disp12MaxDiff=-1, preFilterCap=31,
-            uniquenessRatio=c.uniqueness_ratio, speckleWindowSize=c.speckle_window,
-            speckleRange=c.speckle_range, mode=_MODES[c.mode])
+        self._sgbm = _sgbm(c, disp12_max_diff=math.ceil(c.lr_max_diff))
+        self._bare = _sgbm(c, disp12_max_diff=-1)
 
     def disparity(self, ref: CameraFrame, other: CameraFrame) -> Disparity:
         c = self.config
         pair = rectify(ref, other, c.scale)
         raw = self._match(pair.left, pair.right)
-        right = self._match(pair.right[:, ::-1], pair.left[:, ::-1])[:, ::-1]
         rejected: Counter = Counter()
         h, w = raw.shape
         keep = raw > 0
-        rejected["no_match"] = int((~keep).sum())  # includes SGBM's uniqueness and speckle rejections
+        rejected["no_match"] = int((~keep).sum())  # includes SGBM's uniqueness, speckle and left-right rejections
         cols = np.arange(w, dtype=np.float32)[None, :]
-        ur = np.rint(cols - raw).astype(np.int32)
-        inside = keep & (ur >= 0)
-        urc = np.clip(ur, 0, w - 1)
+        urc = np.clip(np.rint(cols - raw).astype(np.int32), 0, w - 1)
         rows = np.arange(h)[:, None]
-        lr_ok = inside & (np.abs(right[rows, urc] - raw) <= c.lr_max_diff)
-        rejected["left_right"] = int((keep & ~lr_ok).sum())
-        keep = lr_ok
         if c.min_texture > 0:
             textured = keep & (_local_std(pair.left, c.block_size) >= c.min_texture)
             rejected["texture"] = int((keep & ~textured).sum())
@@ -85,8 +79,8 @@ class StereoMatcher:
         return Disparity(pair, disparity, np.where(range_ok, depth, np.nan).astype(np.float32), rejected)
 
     def sgbm_only(self, pair: RectifiedPair) -> np.ndarray:
-        """One bare OpenCV SGBM call on a rectified pair (the speed reference of the bench)."""
-        return self._sgbm.compute(pair.left, pair.right)
+        """One bare OpenCV SGBM call on a rectified pair, without its left-right check (the bench's speed reference)."""
+        return self._bare.compute(pair.left, pair.right)
 
     def _match(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """SGBM disparity in pixels; both images are padded on the left so that SGBM's blind
@@ -111,6 +105,14 @@ class StereoMatcher:
         px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
         py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
         return camera_points_to_cloud(ref, canon, ref.image[py, px], pair.to_camera), disp
+
+
+def _sgbm(c: MatchConfig, disp12_max_diff: int) -> cv2.StereoSGBM:
+    return cv2.StereoSGBM_create(
+        minDisparity=0, numDisparities=c.num_disparities, blockSize=c.block_size,
+        P1=8 * c.block_size ** 2, P2=32 * c.block_size ** 2, disp12MaxDiff=disp12_max_diff, preFilterCap=31,
+        uniquenessRatio=c.uniqueness_ratio, speckleWindowSize=c.speckle_window,
+        speckleRange=c.speckle_range, mode=_MODES[c.mode])
 
 
 def _local_std(image: np.ndarray, block: int) -> np.ndarray:

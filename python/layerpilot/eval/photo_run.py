@@ -25,7 +25,7 @@ from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.map import VoxelMap
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.photos import PairResult, PhotoConfig, PhotoFolder, PhotoStereo
-from layerpilot.photos.adjust import Adjustment
+from layerpilot.depth.adjust import Adjustment
 from layerpilot.progress import Progress
 
 

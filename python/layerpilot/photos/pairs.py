@@ -17,9 +17,9 @@ import numpy as np
 from layerpilot.depth.picking import FramePicker, PickResult
 from layerpilot.depth.stereo import Disparity, StereoMatcher
 from layerpilot.geometry import CameraFrame, PointCloud
-from layerpilot.photos.adjust import Adjustment, BundleAdjuster
+from layerpilot.depth.adjust import Adjustment, BundleAdjuster
 from layerpilot.photos.config import PhotoConfig
-from layerpilot.photos.refine import PoseRefiner, Refinement
+from layerpilot.depth.refine import PoseRefiner, Refinement
 
 
 @dataclass(frozen=True)

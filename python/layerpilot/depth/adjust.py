@@ -29,9 +29,8 @@ from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
 from layerpilot.geometry import CameraFrame, Pose
-from layerpilot.photos.calibration import Calibration
-from layerpilot.photos.config import AdjustConfig
-from layerpilot.photos.refine import HALF_TURN, PoseRefiner, angle_deg
+from layerpilot.depth.config import AdjustConfig
+from layerpilot.depth.refine import HALF_TURN, PoseRefiner, angle_deg
 
 
 @dataclass(frozen=True)
@@ -172,7 +171,8 @@ class BundleAdjuster:
             R = Rotation.from_rotvec(rvec[k]).as_matrix() @ R0[k]
             intr = replace(frames[k].intrinsics, fx=frames[k].intrinsics.fx * focal,
                            fy=frames[k].intrinsics.fy * focal)
-            image = Calibration(intr, np.array([k1, k2, 0.0, 0.0])).undistort(frames[k].image)
+            image = (cv2.undistort(frames[k].image, intr.K, np.array([k1, k2, 0.0, 0.0])) if k1 or k2
+                     else frames[k].image)
             out[k] = replace(frames[k], image=image, pose=Pose.from_rotation(R, centres[k]), intrinsics=intr)
         shifts = [float(np.linalg.norm(centres[k] - gnss[k])) if k in used else math.nan for k in range(n)]
         return Adjustment(out, flipped, links, int(pts.max()) + 1, len(cams), rms0, rms1, per_cam,
