@@ -55,15 +55,15 @@ READY_REPORT_S = 15.0    # while waiting for readiness, say what is still missin
 class FlightLink:
     """A companion-computer MAVLink link to one autopilot. Use as a context manager or call close().
 
-    The parts are public for inspection (``state``, ``commands``, ``control``, ``guided``); fly
-    through the methods here.
+    ``clock`` stamps each pose (``Telemetry.time``: the mission clock); ``geofence`` bounds every
+    waypoint. The parts are public for inspection (``state``, ``commands``, ``control``, ``guided``);
+    fly through the methods here.
     """
 
     def __init__(self, config: LinkConfig | None = None, clock: Callable[[], float] = time.monotonic,
                  on_event: Callable[[str], None] | None = None, geofence: Geofence | None = None) -> None:
         self.config = config if config is not None else LinkConfig()
         self.geofence = geofence
-        self.clock = clock
         self.sync = LinkSync(on_event)
         self.port = MavlinkPort(self.config.url, self.config.source_system, self.config.source_component,
                                 self.config.baud)
