@@ -37,7 +37,7 @@ def _node(args, mission, vehicle, session) -> Running:
     node.start()
     q = node.queue
     return Running(lambda: {"frames": q.received, "dropped": q.dropped, "clouds": node.clouds,
-                            "rejected": node.rejects.total}, node.stop, {"source": node.cfg.source},
+                            "rejected": node.rejects.total, **node.status()}, node.stop, {"source": node.cfg.source},
                    supervisor=node.supervisor)
 
 

@@ -157,10 +157,10 @@ class LiveRefiner:
         return sorted(self._trajectory.items())
 
     def stats(self) -> dict[str, float]:
+        """Pairs refined, rejected per reason, and the clock offset once known (with the pairs it rests on)."""
         dt = self.time_offset
         return {"refined": self.refined, **{f"rejected_{k}": v for k, v in sorted(self.rejected.items())},
-                "time_offset_s": round(dt, 4) if dt is not None else math.nan,
-                "time_offset_pairs": self.offset.pairs}
+                **({"time_offset_s": round(dt, 4)} if dt is not None else {}), "time_offset_pairs": self.offset.pairs}
 
 
 def _ref_from_other(other: Pose, rel: Relative, baseline: float) -> Pose:

@@ -40,7 +40,7 @@ def build_pilot(mission: Mission) -> Pilot:
 
 
 def build_depth_service(mission: Mission) -> DepthService:
-    return DepthService(mission.depth)
+    return DepthService(mission.depth, gimbal=mission.camera.gimbal)
 
 
 def geofence_for(mission: Mission) -> Geofence:

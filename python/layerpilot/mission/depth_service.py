@@ -3,17 +3,24 @@
 One place chooses the source and its settings, so the live depth node and the lock-step
 evaluator make the same clouds: two-view stereo with the measured preset for the image
 width and focal length (chosen on the first frame), or the frame's own depth (simulator, RGB-D).
+Stereo refines the poses of its pairs from the images first (``refine``, on by default;
+``depth.live``): a real drone's reported poses are too coarse for two-view stereo. The vehicle's
+telemetry pose stream (``push_pose``) lets it learn the camera clock's offset and read the
+priors at the exposure time.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
 from layerpilot.config import check_range
 from layerpilot.depth.config import DepthConfig, preset_for
 from layerpilot.depth.downscale import processing_intrinsics
-from layerpilot.geometry import CameraFrame, PointCloud
+from layerpilot.depth.live import LiveConfig, LiveRefiner
+from layerpilot.depth.window import WindowConfig
+from layerpilot.geometry import CameraFrame, PointCloud, Pose
 from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth
 
 
@@ -25,11 +32,28 @@ class DepthServiceConfig:
     max_depth: float = 100.0  # m: ground-truth pixels beyond are dropped; the map's max range for the clouds
     stride: int = 2  # ground truth: every stride-th pixel in each direction
     queue_size: int = 4  # frames waiting in the live node; the oldest is dropped beyond
+    refine: bool = True  # stereo: refine the pairs' poses from the images (false: use the reported poses as they are)
+    window: int = 20  # keyframes adjusted together
+    gnss_sigma_h: float = 2.0  # m: how far the reported position may be off, per horizontal axis ...
+    gnss_sigma_v: float = 4.0  # ... and vertically
+    yaw_sigma_deg: float = 3.0  # deg: how far the reported heading may be off
+    max_clock_offset: float = 0.5  # s: the camera clock's offset from the telemetry's is searched within this
 
     def __post_init__(self) -> None:
         check_range("depth.max_depth", self.max_depth, 1.0, 10_000.0)
         check_range("depth.stride", self.stride, 1, 64)
         check_range("depth.queue_size", self.queue_size, 1, 1000)
+        check_range("depth.window", self.window, 2, 500)
+        check_range("depth.gnss_sigma_h", self.gnss_sigma_h, 0.01, 1000.0)
+        check_range("depth.gnss_sigma_v", self.gnss_sigma_v, 0.01, 1000.0)
+        check_range("depth.yaw_sigma_deg", self.yaw_sigma_deg, 0.01, 180.0)
+        check_range("depth.max_clock_offset", self.max_clock_offset, 0.0, 10.0)
+
+    def live(self, gimbal: bool = True) -> LiveConfig:
+        """The live refinement's settings."""
+        window = dataclasses.replace(WindowConfig(), size=self.window, gnss_sigma_h=self.gnss_sigma_h,
+                                     gnss_sigma_v=self.gnss_sigma_v, yaw_sigma_deg=self.yaw_sigma_deg)
+        return LiveConfig(window=window, max_offset=self.max_clock_offset, gimbal=gimbal)
 
 
 def stereo_preset(width: int, fx: float | None = None) -> DepthConfig:
@@ -39,27 +63,44 @@ def stereo_preset(width: int, fx: float | None = None) -> DepthConfig:
 
 
 class DepthService:
-    """Frames -> clouds; counts frames, clouds and the source's reasons for skipping."""
+    """Frames -> clouds; counts frames, clouds and the source's reasons for skipping.
 
-    def __init__(self, cfg: DepthServiceConfig) -> None:
+    ``gimbal``: the camera keeps only the vehicle's heading (``camera.gimbal``), which is how the
+    telemetry's poses turn into camera poses."""
+
+    def __init__(self, cfg: DepthServiceConfig, gimbal: bool = True) -> None:
         self.cfg = cfg
         self.source: DepthSource | None = (GroundTruthDepth(cfg.max_depth, cfg.stride)
                                            if cfg.source == "ground_truth" else None)
+        self.refiner = LiveRefiner(cfg.live(gimbal)) if cfg.source == "stereo" and cfg.refine else None
         self.frames = 0
         self.clouds = 0
+        self._reported: list[tuple[float, Pose]] = []  # without refinement: the poses the clouds were placed with
+
+    def push_pose(self, stamp: float, pose: Pose) -> None:
+        """One pose of the vehicle's telemetry stream (body -> map, telemetry clock), in order of arrival."""
+        if self.refiner is not None:
+            self.refiner.push_pose(stamp, pose)
 
     def push(self, frame: CameraFrame) -> PointCloud | None:
         """The frame's cloud, or None (no partner yet, skipped, or no points)."""
         if self.source is None:  # stereo presets depend on the size matched at: chosen on the first frame
             k = processing_intrinsics(frame.intrinsics)
-            self.source = StereoDepth(stereo_preset(k.width, k.fx))
+            self.source = StereoDepth(stereo_preset(k.width, k.fx), refiner=self.refiner)
         self.frames += 1
+        if self.refiner is None:
+            self._reported.append((frame.stamp, frame.pose))
         cloud = self.source.push(frame)
         if cloud is None or len(cloud) == 0:
             return None
         self.clouds += 1
         return cloud
 
-    def stats(self) -> dict[str, int]:
+    def trajectory(self) -> list[tuple[float, Pose]]:
+        """The camera poses the clouds were placed with, [(stamp, camera -> map)]: the refined keyframes'
+        latest estimates, or without refinement every frame's reported pose."""
+        return self.refiner.trajectory() if self.refiner is not None else list(self._reported)
+
+    def stats(self) -> dict[str, float]:
         source = self.source.stats() if self.source is not None else {}
         return {"frames": self.frames, "clouds": self.clouds, **source}
