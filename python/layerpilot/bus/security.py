@@ -61,8 +61,10 @@ def node_user(role: str, vehicle: str | None = None) -> str:
     return role if vehicle is None else f"{role}-{keys.check_vehicle(vehicle)}"
 
 
-def grants(vehicles: list[str], operator_can_save: bool = False) -> dict[str, Grant]:
-    """Every user of a mission and what it may do (the one place that says who talks to whom)."""
+def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = False) -> dict[str, Grant]:
+    """Every user of a mission and what it may do (the one place that says who talks to whom).
+
+    ``photos``: the camera plays a photo folder and publishes its photos' poses (there is no link node)."""
     services = tuple(f"{keys.PREFIX}/*/map/{name}" for name in keys.SERVICES)
     out = {MAP_SERVER: Grant(publish=tuple(key for v in vehicles for key in (keys.Keys(v).layers,
                                                                              keys.Keys(v).health(MAP_SERVER))),
@@ -70,7 +72,8 @@ def grants(vehicles: list[str], operator_can_save: bool = False) -> dict[str, Gr
     for v in vehicles:  # every node also puts its own health key, nothing else of another node's
         k = keys.Keys(v)
         out[node_user("sim", v)] = Grant(publish=(k.camera, k.health("sim")), subscribe=(k.pose,))  # pose: camera-only
-        out[node_user("camera", v)] = Grant(publish=(k.camera, k.health("camera")), subscribe=(k.pose,))  # a real camera
+        out[node_user("camera", v)] = Grant(publish=(k.camera, k.health("camera")) + ((k.pose,) if photos else ()),
+                                            subscribe=(k.pose,))  # a real camera; a photo folder's is the telemetry
         out[node_user("link", v)] = Grant(publish=(k.pose, k.health("link")),
                                           subscribe=(k.waypoint, k.state))  # state: battery RTL
         out[node_user("depth", v)] = Grant(publish=(k.cloud, k.health("depth")), subscribe=(k.camera,))
@@ -234,10 +237,10 @@ def hub_config(cfg: BusConfig, secrets: MissionSecrets, acl: dict) -> zenoh.Conf
 
 
 def open_hub(cfg: BusConfig, secrets_dir: str | Path, vehicles: list[str],
-             operator_can_save: bool | None = None) -> tuple[zenoh.Session, MissionSecrets]:
+             operator_can_save: bool | None = None, photos: bool = False) -> tuple[zenoh.Session, MissionSecrets]:
     """Prepare the mission's secrets and open its hub session (the endpoints as ``check_security`` allows)."""
     cfg.check_security()
-    table = grants(vehicles, cfg.operator_can_save if operator_can_save is None else operator_can_save)
+    table = grants(vehicles, cfg.operator_can_save if operator_can_save is None else operator_can_save, photos)
     s = prepare_secrets(secrets_dir, table)
     try:
         return zenoh.open(hub_config(cfg, s, access_control(table))), s

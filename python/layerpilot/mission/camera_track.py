@@ -35,7 +35,8 @@ class CameraSettings:
     gimbal: bool = True  # the camera keeps only the body's heading (a stabilised gimbal); false: hard mounted
     max_gap: float = 0.5  # s: a frame between poses further apart is dropped (a telemetry gap)
     latency: float = 0.0  # s from exposure to the frame reaching the node (device and stream sources)
-    file_start: float = 0.0  # mission time (s) of a video file's first frame
+    file_start: float = 0.0  # mission time (s) of a video file's first frame (a photo folder's first photo)
+    play_rate: float = 1.0  # a photo folder plays this many times faster than its photos were taken
     reconnect_max: float = 10.0  # s: the longest wait between reopening a dropped stream or device
     history: float = 30.0  # s of poses kept for interpolation
 
@@ -49,6 +50,7 @@ class CameraSettings:
         check_range("camera.max_gap", self.max_gap, 0.01, 10.0)
         check_range("camera.latency", self.latency, 0.0, 5.0)
         check_range("camera.file_start", self.file_start, 0.0, 1e7)
+        check_range("camera.play_rate", self.play_rate, 0.01, 1000.0)
         check_range("camera.reconnect_max", self.reconnect_max, 0.1, 20.0)  # under the stall limit
         check_range("camera.history", self.history, 1.0, 3600.0)
 

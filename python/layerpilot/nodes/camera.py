@@ -1,15 +1,17 @@
 """The camera node: a real camera's frames on the bus, each with its pose, as the simulator node publishes them.
 
 It reads a device (``camera.source = "0"``), a stream (``rtsp://...``, ``http://...``) or a
-video file with OpenCV's ``VideoCapture``. A frame is stamped on the mission clock: a file's
+video file with OpenCV's ``VideoCapture``, or plays a folder of geotagged photos
+(``photos.player``). A frame is stamped on the mission clock: a file's
 frame ``i`` at ``file_start + i / fps``; a live frame at its arrival, moved onto the mission
 clock by the offset learnt from the link node's pose stream (mission.camera_track.ClockOffset),
-less ``latency``. It waits for a pose at or after its time while the pose stream keeps coming
+less ``latency``; a photo at ``file_start`` plus its capture time after the first photo's, played at
+that pace (``play_rate`` times faster), its EXIF/XMP pose published first as the telemetry (pose) stream. It waits for a pose at or after its time while the pose stream keeps coming
 (one at least every ``max_gap`` seconds; a file's frames wait for the first pose too), gets the interpolated camera pose
 (mission.camera_track.PoseTrack) or is dropped with the reason counted, is undistorted with the
 calibration and goes out on ``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
 0, saying so); a device or stream that stops giving frames is reopened with a doubling wait up to
-``reconnect_max``.
+``reconnect_max``; a photo folder that has played leaves the node idle (``up`` does not replay it).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import zenoh
 
 from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
-from layerpilot.bus.messages import FrameMessage, State, decode_state, encode_frame
+from layerpilot.bus.messages import FrameMessage, State, decode_state, encode_frame, encode_state
 from layerpilot.bus.reject import Rejects
 from layerpilot.bus.session import publish
 from layerpilot.geometry import CameraFrame
@@ -32,15 +34,19 @@ from layerpilot.mission.camera_track import CameraSettings, ClockOffset, PoseTra
 from layerpilot.nodes.runner import WAKE_PERIOD
 from layerpilot.nodes.supervise import Supervisor
 from layerpilot.photos.calibration import Calibration, read_calibration
+from layerpilot.photos.player import PhotoPlayer, open_player
 
 _log = logging.getLogger("layerpilot.camera")
+POSE_ROUND_TRIP = 2.0  # s: a photo's published pose is back from the bus by then, or the photo is dropped
 
 
 def source_kind(source: str) -> str:
-    """``device`` (an index), ``stream`` (a URL) or ``file``."""
+    """``device`` (an index), ``stream`` (a URL), ``photos`` (a folder) or ``file``."""
     if source.isdigit():
         return "device"
-    return "stream" if "://" in source else "file"
+    if "://" in source:
+        return "stream"
+    return "photos" if Path(source).is_dir() else "file"
 
 
 class CameraNode:
@@ -51,11 +57,19 @@ class CameraNode:
         if settings.source == "sim":
             raise ValueError("camera.source is 'sim': give a device index, a stream URL or a video file "
                              "(--source), or let the simulator node render the frames")
-        if not settings.calibration:
+        self.kind = source_kind(settings.source)
+        if not settings.calibration and self.kind != "photos":  # photos: EXIF's camera unless one is given
             raise ValueError("camera.calibration: give the camera's OpenCV calibration file (--calibration)")
         self.session, self.keys, self.settings = session, keys.Keys(vehicle), settings
-        self.calibration: Calibration = read_calibration(settings.calibration)
-        self.kind = source_kind(settings.source)
+        self.calibration: Calibration | None = read_calibration(settings.calibration) if settings.calibration else None
+        self.player: PhotoPlayer | None = None
+        if self.kind == "photos":
+            if settings.gimbal:
+                raise ValueError("camera.gimbal: a photo's attitude is the camera's own; set camera.gimbal = false "
+                                 "so that its pose is not levelled")
+            self.player = open_player(settings.source, settings.mount, settings.file_start, self.calibration)
+            for name, why in self.player.folder.skipped.items():
+                _log.warning("camera: photo %s skipped: %s", name, why)
         if self.kind == "file" and not Path(settings.source).is_file():
             raise ValueError(f"camera.source: video file {settings.source} not found")
         self.supervisor = supervisor or Supervisor(_log)
@@ -69,6 +83,7 @@ class CameraNode:
         self._pose_heard = 0.0  # local monotonic time of the newest pose
         self._cap: cv2.VideoCapture | None = None
         self._fps = 0.0
+        self._played_from = 0.0  # local monotonic time the first photo went out
         self._backoff = 0.5
         self._outage = False
         self._sub = None
@@ -110,6 +125,8 @@ class CameraNode:
 
     def _open(self) -> bool:
         src = self.settings.source
+        if self.player is not None:
+            return True
         cap = cv2.VideoCapture(int(src) if self.kind == "device" else src)
         if not cap.isOpened():
             cap.release()
@@ -125,6 +142,8 @@ class CameraNode:
         if self.stop_event.is_set():
             self.ended.set()
             return False
+        if self.player is not None:
+            return self._play_photo()
         ok, image = self._cap.read() if self._cap is not None else (False, None)
         arrived = time.monotonic()
         if not ok:
@@ -150,13 +169,46 @@ class CameraNode:
             self.keys.vehicle, self.published, CameraFrame(rgb, pose, calibration.intrinsics, stamp))))
         return True
 
+    def _play_photo(self) -> bool:
+        """The next photo when it is due (its pose first, as telemetry; the frame is placed from the pose
+        stream as any frame is); idle once the folder has played."""
+        player, index = self.player, self.read
+        if index == len(player):
+            _log.info("camera: photo folder %s played: %d photos (%d published, %d dropped); idle",
+                      self.settings.source, index, self.published, self.dropped)
+        if index >= len(player):
+            self.read = len(player) + 1
+            self.stop_event.wait(WAKE_PERIOD)
+            return True
+        if index == 0:
+            self._played_from = time.monotonic()
+        due = self._played_from + (player.stamps[index] - player.stamps[0]) / self.settings.play_rate
+        while not self.stop_event.is_set() and (wait := due - time.monotonic()) > 0:
+            self.supervisor.beat("camera")
+            self.stop_event.wait(min(wait, WAKE_PERIOD))
+        if self.stop_event.is_set():
+            return True
+        self.read += 1
+        stamp = float(player.stamps[index])
+        publish(self.session, self.keys.pose, encode_state(State(stamp, self.keys.vehicle, player.body_pose(index))))
+        frame = player.frame(index)
+        with self._cond:  # the pose comes back through the bus, as any telemetry does
+            self._cond.wait_for(lambda: self.track.newest >= stamp or self.stop_event.is_set(), POSE_ROUND_TRIP)
+            pose = self.track.camera_at(stamp)
+        if pose is None:
+            return True
+        self.published += 1
+        publish(self.session, self.keys.camera, encode_frame(FrameMessage(
+            self.keys.vehicle, self.published, CameraFrame(frame.image, pose, frame.intrinsics, stamp))))
+        return True
+
     def _camera_pose(self, stamp: float):
         """Wait for a pose at or after ``stamp`` while poses keep coming (a file's frames also wait for the
         first pose: a replayed pose stream may start after the node), then interpolate (None: dropped)."""
         with self._cond:
             while (self.track.newest < stamp and not self.stop_event.is_set()
                    and (time.monotonic() - self._pose_heard <= self.settings.max_gap
-                        or (self.kind == "file" and not len(self.track)))):
+                        or (self.kind in ("file", "photos") and not len(self.track)))):
                 self.supervisor.beat("camera")
                 self._cond.wait(0.05)
             return self.track.camera_at(stamp)
@@ -192,4 +244,4 @@ class CameraNode:
     def status(self) -> dict:
         return {"read": self.read, "published": self.published, "dropped": dict(self.track.dropped),
                 "poses": len(self.track), "reconnects": self.reconnects, "rejected": self.rejects.total,
-                "source": "live" if self.kind != "file" else "file"}
+                "source": self.kind if self.kind in ("file", "photos") else "live"}

@@ -90,7 +90,8 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
                   secrets=None, resume: bool = False, clock_start: float = 0.0,
                   mission_id: str = "", frames: str = "sim") -> list[NodeProcess]:
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide (``frames``:
-    ``camera`` runs `layerpilot camera` in the sim node's place, for a real camera); with
+    ``camera`` runs `layerpilot camera` in the sim node's place, for a real camera; ``photos`` runs only
+    `layerpilot camera` and depth: a photo folder is the camera and the telemetry, nothing flies); with
     ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file;
     ``resume``: the decide nodes continue the saved survey (``decide --resume``); ``clock_start``:
     where the sim and link nodes' stamps start on the mission clock (``--clock-start``);
@@ -105,7 +106,7 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
 
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
-        for role in (frames, "link", "depth", "decide"):
+        for role in (("camera", "depth") if frames == "photos" else (frames, "link", "depth", "decide")):
             own = {"decide": ["--mission-id", mission_id] + (["--resume"] if resume else []),
                    "sim": ["--clock-start", repr(clock_start)], "link": ["--clock-start", repr(clock_start)]}
             argv = base + [role, "--vehicle", v] + common + login(role, v) + own.get(role, [])
@@ -178,6 +179,15 @@ class Supervisor:
                 n.proc.wait()
 
 
+def frames_of(source: str) -> str:
+    """Who makes a mission's frames: ``sim``, ``photos`` (a folder played as the camera) or ``camera``."""
+    from layerpilot.nodes.camera import source_kind
+
+    if source == "sim":
+        return "sim"
+    return "photos" if source_kind(source) == "photos" else "camera"
+
+
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
        duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
        operator_can_save: bool = False, resume: bool = False, record: str | Path | None = None) -> int:
@@ -208,12 +218,13 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     bus, secrets = bus_config(m.bus, endpoint), None
     if bus.security:  # the hub: holds the well-known endpoint, checks every login, enforces the allow-list
         secrets_dir = Path(log_dir).parent / "bus-secrets" if secrets_dir is None else Path(secrets_dir)
-        session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save)
+        session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save,
+                                    photos=frames_of(m.camera.source) == "photos")
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
     mission_id = uuid.uuid4().hex[:12]
     sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id,
-                                   "sim" if m.camera.source == "sim" else "camera"),
+                                   frames_of(m.camera.source)),
                      Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud

@@ -73,11 +73,16 @@ def take_off_origin(meta: PhotoMetadata) -> LocalFrame:
 
 def read_folder(folder: str | Path, origin: LocalFrame | None = None, calibration: Calibration | None = None,
                 width: int = 1000) -> PhotoFolder:
-    """Read every JPEG's metadata (sorted by name) and keep the ones that can be placed."""
+    """Read every JPEG's metadata (sorted by name) and keep the ones that can be placed.
+
+    ``folder`` holds the photos, or is a project folder with them in ``images/`` (as OpenDroneMap's).
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"{folder}: not a folder")
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in SUFFIXES)
+    if not files and (folder / "images").is_dir():
+        return read_folder(folder / "images", origin, calibration, width)
     if not files:
         raise ValueError(f"{folder}: no .jpg photos")
     photos: list[PhotoMetadata] = []

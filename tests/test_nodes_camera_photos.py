@@ -1,0 +1,87 @@
+"""A folder of real geotagged photos played as a live camera: frames on the mission clock from their EXIF
+capture times, their EXIF/XMP poses published as the telemetry and placed back on the frames by the
+camera node, on real Zenoh (the shared Brighton Beach photos)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from layerpilot.bus import keys
+from layerpilot.bus.messages import decode_frame, decode_state
+from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+from layerpilot.mission.camera_track import CameraSettings
+from layerpilot.nodes.camera import CameraNode
+from layerpilot.photos.player import open_player
+
+from conftest import SHARED, wait_for
+
+BRIGHTON = SHARED / "data" / "brighton_beach"
+# DJI_0018..0023 every 7 s, then the second line 9 s later, every 7 s (EXIF DateTimeOriginal)
+CAPTURED = [0.0, 7.0, 14.0, 21.0, 28.0, 35.0, 44.0, 51.0, 58.0, 65.0, 72.0, 79.0]
+
+
+def photo_settings(source: Path, **changes) -> CameraSettings:
+    return CameraSettings(source=str(source), pitch_deg=90.0, gimbal=False, file_start=100.0, **changes)
+
+
+def test_a_project_folder_plays_in_capture_order_and_its_poses_survive_the_mount() -> None:
+    settings = photo_settings(BRIGHTON)  # the project folder: its photos are in images/
+    player = open_player(BRIGHTON, settings.mount, settings.file_start)
+    assert len(player) == 12 and not player.folder.skipped
+    assert player.stamps.tolist() == [100.0 + t for t in CAPTURED]
+    for i in (0, 11):  # the telemetry pose with the mount put back is the photo's camera
+        camera = player.body_pose(i) @ settings.mount
+        assert np.abs(camera.matrix - player.camera_pose(i).matrix).max() < 1e-12
+    assert player.frame(3).stamp == 121.0 and player.frame(3).image.shape == (562, 1000, 3)
+
+
+def test_the_camera_node_plays_photos_as_frames_and_telemetry_at_their_pace() -> None:
+    settings = photo_settings(BRIGHTON / "images", play_rate=40.0)
+    ep = free_endpoint()
+    node_session, test_session = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
+    k = keys.Keys("uav1")
+    frames, poses, arrived = [], [], []
+    subs = [test_session.declare_subscriber(k.camera, lambda s: (frames.append(decode_frame(s.payload.to_bytes())),
+                                                                 arrived.append(time.monotonic()))),
+            test_session.declare_subscriber(k.pose, lambda s: poses.append(decode_state(s.payload.to_bytes())))]
+    node = CameraNode(node_session, "uav1", settings)
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    try:
+        node.start()
+        runner.start()
+        wait_for(lambda: node.read > len(node.player), "the folder to play", timeout=120.0)
+        wait_for(lambda: len(frames) == node.published and len(poses) == 12, "the frames and poses to arrive")
+        assert runner.is_alive()  # a played folder leaves the node idle: `up` does not replay it
+    finally:
+        stop.set()
+        runner.join(timeout=10.0)
+        for sub in subs:
+            sub.undeclare()
+        node.stop()
+        node_session.close()
+        test_session.close()
+
+    player = node.player
+    assert node.published == 12 and not node.track.dropped and node.status()["source"] == "photos"
+    assert [p.stamp for p in poses] == [100.0 + t for t in CAPTURED]
+    assert [m.frame.stamp for m in frames] == [100.0 + t for t in CAPTURED]
+    for i, m in enumerate(frames):  # placed from the telemetry, where the photo's metadata says
+        assert np.abs(m.frame.pose.matrix - player.camera_pose(i).matrix).max() < 1e-9
+        assert m.frame.intrinsics == player.frame(i).intrinsics and m.frame.intrinsics.width == 1000
+    # paced by the capture times: 79 s of photos at 40x take at least 79 / 40 s between first and last
+    assert arrived[-1] - arrived[0] >= 79.0 / 40.0 - 0.1
+
+
+def test_a_photo_folder_needs_the_camera_unlevelled() -> None:
+    session = open_session(BusConfig(endpoint=free_endpoint()))
+    try:
+        with pytest.raises(ValueError, match="camera.gimbal"):
+            CameraNode(session, "uav1", CameraSettings(source=str(BRIGHTON), gimbal=True))
+    finally:
+        session.close()
