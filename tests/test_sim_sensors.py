@@ -11,6 +11,7 @@ import pytest
 
 from layerpilot.config import ConfigError
 from layerpilot.geometry import CameraFrame
+from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
 from layerpilot.mission.config import load_mission
@@ -210,6 +211,33 @@ def test_mavlink_position_and_attitude_messages_carry_the_error():
     finally:
         client.close()
         endpoint.close()
+
+
+def test_the_autopilot_flies_its_estimate_so_the_truth_is_off_by_the_error():
+    """As a real autopilot: the link's waypoint is reached in the EKF's frame; the true vehicle is off by the error."""
+    from layerpilot.link.link import FlightLink
+
+    endpoint = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 2.0), ground_z=2.0), "tcp:127.0.0.1:0",
+                              EndpointConfig(sensors=CONSUMER, seed=3)).start(speed=10.0)
+    config = LinkConfig(url=f"tcp:127.0.0.1:{endpoint.addresses[0][1]}", arrival_hold_s=0.3, arrival_tolerance_m=0.5,
+                        command_timeout_s=1.0, ready_timeout_s=10.0)
+    try:
+        with FlightLink(config, clock=lambda: endpoint.time) as link:
+            link.connect(5.0)
+            link.wait_ready()
+            link.start_guided()
+            link.arm()
+            link.takeoff(25.0)
+            waypoint = np.array([40.0, 0.0, 25.0])
+            link.goto(*waypoint)
+            assert np.linalg.norm(link.telemetry().position - waypoint) <= 0.6  # arrived, as the EKF sees it
+            with endpoint._lock:
+                true = endpoint.pose().position - endpoint.ekf_origin
+                drift = endpoint.estimator.errors.current.drift
+            assert np.linalg.norm(true + drift - waypoint) < 0.7   # where its estimate is at the waypoint
+            assert np.linalg.norm(true - waypoint) > 1.5           # seed 3: metres away in truth
+    finally:
+        endpoint.stop()
 
 
 def textured(seed: int = 0) -> CameraFrame:

@@ -35,11 +35,13 @@ class Estimator:
 
     def __init__(self, profile: SensorProfile, seed: int) -> None:
         self.errors = PoseErrors(profile, np.random.default_rng([seed, 1]))
+        self._exact = profile.exact_pose
         self._history: deque[VehiclePose] = deque()
 
     def step(self, dt: float, truth: VehiclePose) -> None:
-        self.errors.step(dt)
-        self._history.append(self.report(truth))
+        if not self._exact:  # exact: the errors stay zero; only the history is kept (a camera stamp's look-up)
+            self.errors.step(dt)
+        self._history.append(truth if self._exact else self.report(truth))
         while self._history[0].time < truth.time - HISTORY_S:
             self._history.popleft()
 
@@ -49,7 +51,7 @@ class Estimator:
         return VehiclePose(truth.time, truth.position + e.position, truth.velocity.copy(), truth.roll + e.roll,
                            truth.pitch + e.pitch, _wrap(truth.yaw + e.yaw))
 
-    def at(self, t: float) -> VehiclePose:
+    def at(self, t: float) -> VehiclePose | None:
         """The reported state at ``t`` as a camera node finds it: linear between the two reports around
         ``t``, extrapolated from the last two outside them (None before the first step)."""
         h = self._history

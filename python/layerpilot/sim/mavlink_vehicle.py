@@ -479,7 +479,7 @@ class MavlinkVehicle:
             target_z = self.home[2] + 2.5 if math.isnan(param7) else param7 - self.config.origin.alt
             self._enter_mode("TAKEOFF")
         self._airborne = True
-        self.vehicle.set_position_target(z=target_z)
+        self.vehicle.set_position_target(z=self._true_target((0.0, 0.0, target_z))[2])  # climbs on its estimate
         return mav.MAV_RESULT_ACCEPTED
 
     def _default_intervals(self) -> dict[int, float]:
