@@ -1,4 +1,4 @@
-"""`layerpilot bench map|decide|view|depth|sim|bus|scale`: every speed claim against its reference (layerpilot.bench)."""
+"""`layerpilot bench map|decide|view|depth|sim|bus|scale|photos|mission`: every speed claim against its reference (layerpilot.bench)."""
 
 from __future__ import annotations
 
@@ -58,6 +58,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.add_argument("--width", type=int, default=1000, help="working image width in pixels")
     b.set_defaults(func=_photos)
 
+    b = benches.add_parser("mission", help="a lock-step mission, stages overlapped vs sequential (same bytes?)")
+    b.add_argument("--config", default=None, help="mission file or name (default: the default mission)")
+    b.add_argument("--duration", type=float, default=600.0, help="mission seconds of each run")
+    b.add_argument("--camera", type=size, default=(320, 240), help="camera size WxH")
+    b.set_defaults(func=_mission)
+
 
 def _map(args: argparse.Namespace) -> None:
     from layerpilot.bench.map import main
@@ -109,3 +115,15 @@ def _photos(args: argparse.Namespace) -> int:
     from layerpilot.bench.photos import main
 
     return main(args.folder, args.reference, args.width)
+
+
+def _mission(args: argparse.Namespace) -> int:
+    from layerpilot.bench.mission import main
+    from layerpilot.mission.config import Override, load_mission
+
+    mission = load_mission(args.config, [
+        Override("--duration", "evaluation.duration", args.duration),
+        Override("--camera", "sim.camera.width", args.camera[0]),
+        Override("--camera", "sim.camera.height", args.camera[1]),
+        Override("--state", "decide.state", "")])  # a bench must not overwrite a saved survey
+    return main(mission)
