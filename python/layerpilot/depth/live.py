@@ -35,9 +35,10 @@ class LiveConfig:
     """Live refinement settings; the defaults are the measured ones of docs/depth.md."""
 
     pair: RefineConfig = field(default_factory=lambda: RefineConfig(
-        detector="klt", scale=0.5, features=400, min_inliers=40, min_inlier_ratio=0.5, max_rotation_deg=5.0,
+        detector="klt", features=400, min_inliers=40, min_inlier_ratio=0.5, max_rotation_deg=5.0,
         max_direction_deg=25.0, flip_heading=False, polish=True))
     window: WindowConfig = field(default_factory=WindowConfig)
+    feature_width: int = 320  # px: frames are tracked at this width (or their own, if narrower)
     max_offset: float = 0.5  # s: the camera clock's offset is searched within this each way
     min_offset_pairs: int = 5  # pairs over which the camera turned before the offset is used
     min_scale_points: int = 20  # points seen again to carry the scale over from the partner's pair
@@ -46,6 +47,7 @@ class LiveConfig:
 
     def __post_init__(self) -> None:
         check_range("max_offset", self.max_offset, 0.0, 10.0)
+        check_range("feature_width", self.feature_width, 64)
         check_range("min_offset_pairs", self.min_offset_pairs, 1)
         check_range("min_scale_points", self.min_scale_points, 5)
         check_range("max_scale_ratio", self.max_scale_ratio, 1.0)
@@ -56,7 +58,7 @@ class LiveRefiner:
 
     def __init__(self, config: LiveConfig = LiveConfig()) -> None:
         self.config = config
-        self.pairs = PoseRefiner(config.pair)
+        self.pairs: PoseRefiner | None = None  # made for the first frame's width
         self.window = SlidingWindow(config.window)
         self.offset = TimeOffset(config.max_offset, min_pairs=config.min_offset_pairs)
         self.body = PoseHistory()
@@ -107,6 +109,8 @@ class LiveRefiner:
         other = self.window.frames.get(partner.stamp)
         prior_o = other.prior if other is not None else self.prior(partner)
         seeds = other.points_px if other is not None else None
+        if self.pairs is None:
+            self.pairs = PoseRefiner(replace(c.pair, scale=min(1.0, c.feature_width / frame.size[0])))
         rel, reason, _, _ = self.pairs.relative(frame, partner, seeds)
         if rel is not None:
             rotation, direction = disagreement(prior_f, prior_o, rel)
