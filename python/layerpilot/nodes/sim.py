@@ -1,5 +1,7 @@
 """The simulator node: renders the camera at the simulated vehicle's pose and publishes frames;
-the simulated multicopter serves MAVLink on the configured URLs for the link node."""
+the simulated multicopter serves MAVLink on the configured URLs for the link node. With a sensor
+profile (``sim.sensors``) the frames are what the drone delivers: the degraded image, stamped on
+the camera's clock, with the pose the autopilot reports (docs/sim.md)."""
 
 from __future__ import annotations
 
@@ -63,7 +65,7 @@ class SimNode:
         return {"mavlink": [f"{u} -> {h}:{p}" for u, (h, p) in zip(c.urls, self.sim.endpoint.addresses)],
                 "flavour": c.flavour, "seed": c.world.seed, "trees": self.sim.world.stats()["trees"],
                 "camera": f"{c.camera.width}x{c.camera.height} at {c.frame_rate_hz:g} Hz",
-                "renderer": self.sim.renderer.renderer_name, "speed": self.speed}
+                "renderer": self.sim.renderer.renderer_name, "speed": self.speed, "sensors": c.sensors}
 
     def run(self, stop: threading.Event) -> None:
         """Step the simulator paced to the wall clock until ``stop`` (SIGTERM) is set or ``duration`` has passed."""

@@ -1,7 +1,8 @@
 """Simulator: procedural forest world, rendered camera with ground-truth depth, scripted baselines.
 
 The vehicle dynamics and its MAVLink endpoint live in ``vehicle`` and
-``mavlink_vehicle``; ``simulator`` ties world, camera and vehicle together.
+``mavlink_vehicle``; ``simulator`` ties world, camera and vehicle together; ``sensors``
+states how far what the drone reports is from the truth.
 Rendering needs moderngl and is imported lazily. See docs/sim.md.
 """
 
