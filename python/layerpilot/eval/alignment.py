@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,8 +31,9 @@ if TYPE_CHECKING:  # the C++ map is imported only where a map is used
 
 OFFSET_KEYS = ["offset_x", "offset_y", "offset_z"]
 SCORE_NAMES = MAP_METRICS + [f"{k}_absolute" for k in MAP_METRICS] + OFFSET_KEYS
-SEARCH_STEPS = (8, 4, 2, 1)  # voxels, coarse to fine
-MAX_SEARCH_POINTS = 20_000  # per map during the search (evenly strided); the scores use every voxel
+SEARCH_STEPS = (8, 4, 2, 1)  # voxels, coarse to fine, from 0
+WARM_STEPS = (2, 1)  # from the last offset: GNSS's error wanders slowly between two samples
+MAX_SEARCH_POINTS = 8_000  # per map during the search (evenly strided); the scores use every voxel
 MAX_OFFSET = 30.0  # metres per axis; several times a consumer receiver's error
 _DIRECTIONS = [d for d in itertools.product((-1, 0, 1), repeat=3) if d != (0, 0, 0)]
 
@@ -63,9 +64,10 @@ def best_offset(est: np.ndarray, gt: np.ndarray, resolution: float, start: np.nd
                 cap: float = D_V, max_offset: float = MAX_OFFSET) -> np.ndarray:
     """The whole-voxel translation (est minus truth, metres) that best lays voxel centres ``est`` onto ``gt``.
 
-    A pattern search from ``start`` (default 0: a mission passes its last offset, which GNSS's error
-    changes slowly) in steps of 8, 4, 2, 1 voxels over the 26 neighbours; the result is kept only if
-    its capped chamfer distance is strictly below the one at 0, else it is exactly 0.
+    A pattern search over the 26 neighbours in steps of 8, 4, 2, 1 voxels from 0, or of 2, 1 voxels
+    from ``start`` (a mission passes its last offset, which GNSS's error changes slowly);
+    the result is kept only if its capped chamfer distance is strictly below the one at 0, else it
+    is exactly 0.
     """
     est, gt = np.asarray(est, np.float64), np.asarray(gt, np.float64)
     for name, arr in (("est", est), ("gt", gt)):
@@ -80,7 +82,7 @@ def best_offset(est: np.ndarray, gt: np.ndarray, resolution: float, start: np.nd
     bound = int(max_offset // resolution)
     first = zero if start is None else np.clip(np.round(np.asarray(start, np.float64) / resolution), -bound, bound)
     best = tuple(int(v) for v in first)
-    for step in SEARCH_STEPS:
+    for step in SEARCH_STEPS if start is None else WARM_STEPS:
         while True:
             moves = [tuple(b + step * d for b, d in zip(best, direction)) for direction in _DIRECTIONS]
             moves = [m for m in moves if max(abs(v) for v in m) <= bound]
@@ -111,7 +113,7 @@ class MapScorer:
     box_max: np.ndarray
     d_v: float = D_V
     min_occupancy: float = ABOVE_GT
-    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    offset: np.ndarray | None = None  # the last one found; None before the first search
 
     names = SCORE_NAMES
 
