@@ -141,6 +141,17 @@ def test_a_frame_carries_the_reported_pose_at_its_camera_clock_stamp():
         assert np.allclose(c.frame.pose.rotation, c.truth.pose.rotation)
 
 
+def test_the_stepped_simulator_hands_out_the_delivered_frame():
+    """What the sim node publishes (Simulator.step -> run): the camera-clock stamp and the reported pose."""
+    with hovering_sim("consumer") as sim:
+        shots = [shot for _ in range(60) if (shot := sim.step()) is not None]
+        assert len(shots) == 7  # 5 Hz over 1.2 s: t = 0.02 (the first step), 0.2, ..., 1.2
+        stamp, frame = shots[-1]
+        assert stamp == frame.stamp and -0.14 < stamp - sim.time < -0.08  # 100 ms behind, jitter, trigger latency
+        reported = sim.endpoint.reported_pose_at(stamp)
+        assert frame.pose.position == pytest.approx(reported.position, abs=1e-9)
+
+
 def test_consumer_frames_carry_the_ekf_error_and_the_truth_is_kept_apart():
     with hovering_sim("consumer") as sim:
         for _ in range(60):
