@@ -43,6 +43,7 @@ from layerpilot.bus import layerset as wire
 from layerpilot.decide import area_geometry, zone_mask
 from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.eval.alignment import MapScorer
+from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
 from layerpilot.geometry import CameraFrame, Pose
@@ -183,6 +184,7 @@ class LockstepMission:
         self.inputs: list[PilotInput] = []
         self.columns = self.message = None
         self._telemetry: list[tuple[float, Pose]] = []  # poses since the last frame, for the depth lane
+        self.camera_poses: dict[str, list[tuple[float, Pose]]] = {"truth": [], "raw": []}  # per frame, scored
 
     @property
     def map(self) -> VoxelMap:
@@ -225,9 +227,11 @@ class LockstepMission:
         frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
         next_frame = next_layers = t = 0.0
         while True:
-            position = sim.endpoint.reported_pose().position - origin  # in the map frame, as the autopilot reports it
-            self.pipeline.pose(self.vehicle, t, Pose(position))
-            self._telemetry.append((t, Pose(position)))
+            reported = sim.endpoint.reported_pose()  # what the autopilot says, as the link node publishes it
+            position = reported.position - origin  # in the map frame
+            body = Pose.from_euler(reported.roll, reported.pitch, reported.yaw, position)
+            self.pipeline.pose(self.vehicle, t, body)
+            self._telemetry.append((t, body))
             frame = None
             if t >= next_frame - 1e-9:  # rendered first: it needs only the pose, while the last frame's stereo runs
                 next_frame += frame_period
@@ -289,6 +293,8 @@ class LockstepMission:
         at the true pose, with the true depth) on the other."""
         self.frames += 1
         self.path.append((float(position[0]), float(position[1])))
+        self.camera_poses["truth"].append((reference.stamp, reference.pose))
+        self.camera_poses["raw"].append((frame.stamp, frame.pose))
         if self.view is not None:
             stages.settle()  # the view reads the map
             self.view.frame(t, frame, position, self.map)
@@ -332,10 +338,21 @@ class LockstepMission:
                     "frames": self.frames, "clouds": depth.clouds,
                     **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud
                     "wall_s": round(wall_s, 1), "real_time_factor": round(t / max(wall_s, 1e-9), 1)}
+        extra = self._pose_errors(depth.trajectory())
         paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", self.sampler.series,
-                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings)
-        return MissionResult(out, self.sampler.series.last(), len(records), self.frames, depth.clouds, wall_s, paths,
-                             self.inputs)
+                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings, extra)
+        return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records), self.frames, depth.clouds,
+                             wall_s, paths, self.inputs)
+
+    def _pose_errors(self, refined: list[tuple[float, Pose]]) -> dict[str, float]:
+        """The camera poses as reported (``pose_raw_*``) and as the clouds were placed (``pose_refined_*``)
+        against the truth, after the map's offset: median and p90 of position and attitude error."""
+        truth, offset = self.camera_poses["truth"], self.scorer.offset
+        out: dict[str, float] = {}
+        for name, estimate in (("raw", self.camera_poses["raw"]), ("refined", refined)):
+            if truth and estimate:
+                out.update(pose_errors(truth, estimate, offset).as_dict(f"pose_{name}"))
+        return out
 
 
 def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
