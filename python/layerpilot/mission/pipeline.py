@@ -30,7 +30,7 @@ from layerpilot.geometry import CameraFrame, PointCloud, Pose
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import InsertResult
-from layerpilot.mission.build import build_depth_service, build_pilot
+from layerpilot.mission.build import build_depth_service, build_pilot, map_volume
 from layerpilot.mission.config import Mission
 from layerpilot.mission.depth_service import DepthService
 from layerpilot.mission.map_service import MapService
@@ -64,7 +64,8 @@ class MissionPipeline:
         unknown = set(self.vehicles) - set(mission.vehicles)
         if unknown:
             raise ValueError(f"vehicles: {sorted(unknown)} are not the mission's {mission.vehicles}")
-        self.map = (map_service or MapService(mission.map_server)) if "map" in self.roles else None
+        self.map = ((map_service or MapService(mission.map_server, volume=map_volume(mission)))
+                    if "map" in self.roles else None)
         self.depth: dict[str, DepthService] = ({v: build_depth_service(mission) for v in self.vehicles}
                                                if "depth" in self.roles else {})
         self.pilots: dict[str, Pilot] = ({v: build_pilot(mission) for v in self.vehicles}
