@@ -53,7 +53,7 @@ def _fly(run_dir, speed: float, seed: int, lift: float = 0.0):
     paths = write_run_report(
         run_dir, f"sweep {speed}", sampler.series, layers, aoi, np.array(path),
         {"elevation": layers.elevation}, {"speed_m_s": speed, "seed": seed},
-        final_extra=pose_errors(truth, estimate, offset).as_dict("raw"),
+        final_extra=pose_errors(truth, estimate, offset).as_dict("pose_raw"),
     )
     return sampler.series, paths
 
@@ -75,8 +75,8 @@ def test_run_report_has_every_section_and_sensible_values(tmp_path) -> None:
     assert all(base64.b64decode(i)[:8] == b"\x89PNG\r\n\x1a\n" for i in images)
     assert (tmp_path / "run" / "metrics.csv").read_text().startswith("t,percent_mapped,")
     assert final["offset_z"] == 0.0 and final["f_score"] == final["f_score_absolute"]  # zero-mean noise: no offset
-    assert final["raw_position_median"] == pytest.approx(0.3 * 0.674, abs=0.1)  # median |N(0, 0.3)|
-    assert "<th>aligned to the truth</th><th>absolute</th>" in page
+    assert final["pose_raw_position_median"] == pytest.approx(0.3 * 0.674, abs=0.1)  # median |N(0, 0.3)|
+    assert "<th>aligned to the truth</th><th>absolute</th>" in page and "<td>raw position p90 (m)</td>" in page
 
 
 def test_a_lifted_map_is_scored_after_its_offset_and_without_it(tmp_path) -> None:
@@ -84,7 +84,7 @@ def test_a_lifted_map_is_scored_after_its_offset_and_without_it(tmp_path) -> Non
     final = json.loads(paths["json"].read_text())["final"]
     assert (final["offset_x"], final["offset_y"], final["offset_z"]) == (0.0, 0.0, 2.0)
     assert final["paper_mse_absolute"] - final["paper_mse"] > 0.8  # the 2 m lift is not counted
-    assert final["raw_position_median"] < 0.5  # the lift is removed from the pose errors too
+    assert final["pose_raw_position_median"] < 0.5  # the lift is removed from the pose errors too
     md = paths["md"].read_text()
     assert "| 3D MSE (paper, m), absolute |" not in md  # one row per metric, its absolute value beside it
     assert re.search(r"\| 3D MSE \(paper, m\) \| [0-9.]+ \| [0-9.]+ \|", md)

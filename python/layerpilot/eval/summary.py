@@ -31,7 +31,7 @@ OFFSET_COLUMNS = {"percent_mapped": "area (%)", "percent_mapped_absolute": "area
                   "f_score": "F-score", "f_score_absolute": "F-score absolute",
                   "precision": "precision", "precision_absolute": "precision absolute",
                   "offset_x": "offset x (m)", "offset_y": "offset y (m)", "offset_z": "offset z (m)"}
-POSE_COLUMNS = {f"{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k, text in
+POSE_COLUMNS = {f"pose_{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k, text in
                 (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
                  ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"))}
 
@@ -41,7 +41,7 @@ def label(name: str) -> str:
     if name.endswith(ABSOLUTE):
         base = name[: -len(ABSOLUTE)]
         return f"{LABELS.get(base, base)}, absolute"
-    return LABELS.get(name, name)
+    return LABELS.get(name) or POSE_COLUMNS.get(name) or OFFSET_COLUMNS.get(name, name)
 
 
 def final_table(final: Mapping[str, float]) -> tuple[list[str], list[list[Any]]]:
