@@ -14,6 +14,7 @@ Run it with the eclipse-zenoh under test (``python -m pip install eclipse-zenoh=
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import os
 import signal
 import socket
@@ -92,18 +93,16 @@ def main() -> None:
     if args.role:
         serve(args.role, args.endpoint, args.set)
         return
-    import zenoh
-
     endpoint = args.endpoint or f"tcp/127.0.0.1:{free_port()}"
-    version = getattr(zenoh, "__version__", None) or subprocess.run(
-        [sys.executable, "-m", "pip", "show", "eclipse-zenoh"], capture_output=True, text=True).stdout.split()[3]
+    version = importlib.metadata.version("eclipse-zenoh")
     router = start("router", endpoint, args.set)
     watcher = start("watcher", endpoint, args.set)
     procs = [router, watcher]
     try:
         time.sleep(args.gap)
         base = rss_mb(router.pid), rss_mb(watcher.pid)
-        print(f"eclipse-zenoh {version} {' '.join(args.set)}; baseline RSS: router {base[0]:.1f} MB, watcher {base[1]:.1f} MB", flush=True)
+        print(f"eclipse-zenoh {version} {' '.join(args.set)}; baseline RSS: router {base[0]:.1f} MB, "
+              f"watcher {base[1]:.1f} MB", flush=True)
         for i in range(1, args.kills + 1):
             victim = start("victim", endpoint, args.set)
             time.sleep(args.alive)

@@ -88,7 +88,7 @@ class CloudMessage:
     vehicle: str
     seq: int
     cloud: PointCloud
-    max_range: float = 0.0  # metres the map trusts the rays to; 0 = the map server's default
+    max_range: float = 0.0  # metres the sender trusts its rays to: it only lowers the map server's; 0 = the server's
 
 
 def encode_cloud(c: CloudMessage) -> bytes:
