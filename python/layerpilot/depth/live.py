@@ -14,7 +14,7 @@ where the images put it, at the window's baseline length.
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -63,7 +63,8 @@ class LiveRefiner:
         self.offset = TimeOffset(config.max_offset, min_pairs=config.min_offset_pairs)
         self.body = PoseHistory()
         self.cameras = PoseHistory()
-        self.mount: Pose | None = None  # camera -> (heading-only) body, learnt from the first frame
+        self.mount: Pose | None = None  # camera -> (heading-only) body, learnt from a frame the telemetry covers
+        self._unplaced: deque[tuple[float, Pose]] = deque(maxlen=16)  # frames' (stamp, reported pose) until then
         self.refined = 0
         self.rejected: Counter[str] = Counter()
         self._trajectory: dict[float, Pose] = {}
@@ -80,14 +81,20 @@ class LiveRefiner:
         return body @ self.mount
 
     def _learn_mount(self, frame: CameraFrame) -> None:
-        """The camera's mount from a frame whose reported pose is the telemetry's at its stamp."""
-        if self.mount is not None or (body := self.body.at(frame.stamp)) is None:
+        """The camera's mount from a frame whose reported pose is the telemetry's at its stamp (the
+        telemetry may not have reached a frame's stamp yet: the newest frames wait for it)."""
+        if self.mount is not None:
             return
-        if self.config.gimbal:
-            body = Pose.from_euler(0.0, 0.0, body.yaw, body.position)
-        self.mount = body.inverse() @ frame.pose
-        for t, p in zip(self.body.stamps, self.body.poses):
-            self.cameras.add(t, self._camera(p))
+        self._unplaced.append((frame.stamp, frame.pose))
+        for stamp, pose in self._unplaced:
+            if (body := self.body.at(stamp)) is not None:
+                if self.config.gimbal:
+                    body = Pose.from_euler(0.0, 0.0, body.yaw, body.position)
+                self.mount = body.inverse() @ pose
+                for t, p in zip(self.body.stamps, self.body.poses):
+                    self.cameras.add(t, self._camera(p))
+                self._unplaced.clear()
+                return
 
     @property
     def time_offset(self) -> float | None:

@@ -129,7 +129,7 @@ class PoseRefiner:
         start = np.vstack([(seeds + 0.5) * c.scale - 0.5, fresh]).astype(np.float32)
         if len(start) == 0:
             return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32), np.zeros(0, int)
-        lk = dict(winSize=(21, 21), maxLevel=4, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+        lk = dict(winSize=(15, 15), maxLevel=3, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03))
         fwd, st, _ = cv2.calcOpticalFlowPyrLK(g_other, g_ref, start, None, **lk)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(g_ref, g_other, fwd, None, **lk)
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - start, axis=1) < 0.5)
