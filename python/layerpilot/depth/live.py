@@ -130,7 +130,8 @@ class LiveRefiner:
         if self.mount is not None:
             self.offset.update(self.cameras)
         gnss = float(np.linalg.norm(prior_f.position - prior_o.position))
-        length = self._transfer(other, rel, frame.K) if other is not None else math.nan
+        points = triangulate(frame.K, rel)  # unit baseline, the new frame's axes
+        length = self._transfer(other, rel, points) if other is not None else math.nan
         if math.isfinite(length) and not 1 / c.max_scale_ratio <= length / max(gnss, 1e-9) <= c.max_scale_ratio:
             self.rejected["scale_disagrees"] += 1
             return None
@@ -139,29 +140,24 @@ class LiveRefiner:
         new.pose = _ref_from_other(other.pose, rel, length if math.isfinite(length) else gnss)
         self.window.add(Edge(frame.stamp, partner.stamp, rel, length))
         baseline = float(np.linalg.norm(new.pose.position - other.pose.position))
-        self._keep_points(new, rel, frame.K, baseline)
+        ok = np.isfinite(points).all(1) & (points[:, 2] > 0)
+        new.points_px, new.points = rel.ref_px[ok], points[ok] * baseline
         for kf in self.window.frames.values():
             self._trajectory[kf.stamp] = kf.pose
         self.refined += 1
         return replace(frame, pose=new.pose), replace(partner, pose=place(new.pose, rel, baseline))
 
-    def _transfer(self, other: Keyframe, rel: Relative, K: np.ndarray) -> float:
+    def _transfer(self, other: Keyframe, rel: Relative, points: np.ndarray) -> float:
         """The baseline length that puts the partner's earlier points, seen again, at their depths; NaN if too few."""
         seen = rel.seeds >= 0
         if seen.sum() < self.config.min_scale_points:
             return math.nan
-        X_other = triangulate(K, rel)[seen] @ rel.R.T + rel.t  # unit baseline, the partner's axes
+        X_other = points[seen] @ rel.R.T + rel.t  # unit baseline, the partner's axes
         z_metric = other.points[rel.seeds[seen], 2]
         ok = (X_other[:, 2] > 0) & (z_metric > 0)
         if ok.sum() < self.config.min_scale_points:
             return math.nan
         return float(np.median(z_metric[ok] / X_other[ok, 2]))
-
-    @staticmethod
-    def _keep_points(kf: Keyframe, rel: Relative, K: np.ndarray, baseline: float) -> None:
-        X = triangulate(K, rel) * baseline
-        ok = np.isfinite(X).all(1) & (X[:, 2] > 0)
-        kf.points_px, kf.points = rel.ref_px[ok], X[ok]
 
     def trajectory(self) -> list[tuple[float, Pose]]:
         """The refined camera poses so far (stamp on the camera clock, camera -> map), oldest first."""
