@@ -35,7 +35,8 @@ def test_study_quick_report_has_every_section_and_plausible_values(tmp_path) -> 
     study = tmp_path / "study"
     assert f"report: {study / 'report.html'}" in out
     page = (study / "report.html").read_text()
-    for section in ["Table 1", "Standard 3D metrics", "Runs", "Settings", "Metrics over time", "Flight paths"]:
+    for section in ["Table 1", "Standard 3D metrics", "Scoring up to the map", "Runs", "Settings", "Metrics over time",
+                    "Flight paths"]:
         assert section in page, section
     assert len(re.findall(r"data:image/png;base64,", page)) >= 8 + 2 * 2  # metric plots + each run's path, layers
     behaviors = json.loads((study / "metrics.json").read_text())["behaviors"]
