@@ -150,6 +150,12 @@ QUERIES = [f"{K.service('layers')}?x={x}" for x in ("1e300", "1e19", "9.3e18", "
 ]
 
 
+def map_stats(session) -> pb.MapStats:
+    stats = pb.MapStats()
+    stats.ParseFromString(next(iter(session.get(K.service("stats"), timeout=20.0))).ok.payload.to_bytes())
+    return stats
+
+
 def answered(session, selector: str) -> bool:
     return len(list(session.get(selector, timeout=20.0))) > 0
 
@@ -195,6 +201,7 @@ height = 120
         pids = node_pids(lines)
         before = {name: rss_mb(pid) for name, pid in {**pids, "up": up.pid}.items()}
         hostile = hostile_payloads()
+        map_before = map_stats(operator)
 
         secrets = logs.parent / "bus-secrets"
         sessions = {user: open_node_session(BusConfig(endpoint=ep), secrets / f"{user}.json")
@@ -246,6 +253,11 @@ height = 120
         # the far clouds' points (the queue drops the oldest of a burst: at least one 10,000-point cloud got in)
         assert int(re.findall(r"outside=(\d+)", status["map-server"])[-1]) > 9_900
         assert "outside the area" in (logs / "map-server.log").read_text()  # the far origin's clouds
+        # the map is intact: nothing lost, and nothing reaches past the mission's volume (+-220 m)
+        map_after = map_stats(operator)
+        assert map_after.leaves >= map_before.leaves and map_after.clouds_inserted > map_before.clouds_inserted
+        corners = [getattr(map_after, b) for b in ("bounds_min", "bounds_max")]
+        assert all(abs(c.x) <= 221 and abs(c.y) <= 221 for c in corners), corners
         sub.undeclare()
 
         # three SIGKILLs of the map server, 15 s apart: it comes back each time; the others stay bounded
