@@ -21,12 +21,11 @@ The vehicle takes off from the origin, on the terrain at the launch clearing.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import math
 
 import numpy as np
 
@@ -139,8 +138,8 @@ class Simulator:
             return Capture(frame, frame, vehicle)
         pitch = self.config.camera.pitch_deg
         nominal = camera_pose(vehicle.position, vehicle.yaw, pitch)
-        error = self.endpoint.estimator.errors.current
         if not self.sensors.exact_pose:  # the gimbal levels the camera on the EKF's horizon: the truth tilts
+            error = self.endpoint.estimator.errors.current
             tilt = _tilt(error.roll, error.pitch, vehicle.yaw).T
             nominal = Pose.from_rotation(tilt @ nominal.rotation, nominal.position)
         truth = self.renderer.render(nominal, now)
