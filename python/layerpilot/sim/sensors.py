@@ -10,7 +10,7 @@ numbers come from:
   (UBX-17051259): RTK 0.01 m + 1 ppm CEP horizontal, 0.01 m + 1 ppm R50 vertical; the
   EKF's output is kept a few times worse (2 cm / 4 cm per axis) for antenna-offset and
   fusion lag. Attitude from a tuned EKF3 (0.2 deg tilt); heading with a dual-antenna
-  moving base (F9P heading accuracy 0.4 deg at 1 m baseline) -> 0.5 deg. A camera with a
+  moving base (u-blox quotes a few tenths of a degree at a 1 m baseline) -> 0.5 deg. A camera with a
   hot-shoe feedback pin (PX4 "camera capture", ArduPilot CAM_FEEDBACK_PIN): 10 ms offset,
   2 ms jitter (ArduPilot logs CAM events at 50 Hz, ardupilot issue 7892).
 * ``consumer``: a u-blox M8/M9-class receiver under ArduPilot EKF3 / PX4 EKF2 with a
@@ -18,7 +18,7 @@ numbers come from:
   (UBX-15031086): 2.5 m CEP (GPS), 2.0 m CEP (GPS+GLONASS); CEP 2.0 m is 1.70 m per axis
   for a circular Gaussian (CEP = 1.1774 sigma) -> 1.7 m; NEO-M9N: 1.5 m CEP. GNSS errors
   (multipath, ionosphere, orbits) decorrelate over minutes: the measured autocorrelation
-  of a consumer receiver bends near 1 min and reaches zero after tens of minutes
+  of a consumer receiver bends near 1 min and decays over tens of minutes
   (D. L. Wilson, "Correlation of errors", erols.com/dlwilson/gpscorr.htm) -> tau 120 s.
   Vertical GNSS is 1.5-2x worse than horizontal -> 3.0 m; EKF3 takes height from the
   barometer by default (EK3_SRC1_POSZ = 1), which drifts with temperature and weather
