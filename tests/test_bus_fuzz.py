@@ -146,7 +146,8 @@ def test_decide_and_depth_nodes_survive_thousands_of_bad_messages():
         time.sleep(0.5)
         k = Keys("uav1")
         expected = {}
-        layers_ok = lambda p: to_column_layers(decode_layer_set(p))  # noqa: E731 - what decide accepts
+        cells = Mission().map_server.window[2] * Mission().map_server.window[3]  # decide's cap: the mission's window
+        layers_ok = lambda p: to_column_layers(decode_layer_set(p, max_cells=cells))  # noqa: E731 - what decide accepts
         for key, good, decode in ((k.layers, GOOD[decode_layer_set], layers_ok), (k.pose, GOOD[msg.decode_state], msg.decode_state),
                                   (k.camera, GOOD[msg.decode_frame], msg.decode_frame),
                                   ("layerpilot/uav2/decision", GOOD[msg.decode_decision], msg.decode_decision)):
@@ -162,11 +163,12 @@ def test_decide_and_depth_nodes_survive_thousands_of_bad_messages():
             pub.undeclare()
             expected[key] = len(bad)
         want_decide = expected[k.layers] + expected[k.pose] + expected["layerpilot/uav2/decision"]
+        want_depth = expected[k.camera] + expected[k.pose]  # depth hears the pose too (the camera clock)
         end = time.monotonic() + 60
-        while (decide.rejects.total < want_decide or depth.rejects.total < expected[k.camera]) and time.monotonic() < end:
+        while (decide.rejects.total < want_decide or depth.rejects.total < want_depth) and time.monotonic() < end:
             time.sleep(0.05)
         time.sleep(0.5)  # nothing more may arrive
-        assert decide.rejects.total == want_decide and depth.rejects.total == expected[k.camera]
+        assert decide.rejects.total == want_decide and depth.rejects.total == want_depth
         assert want_decide > 2000
         # still working: a good frame with depth becomes a cloud
         client.put(k.camera, GOOD[msg.decode_frame])
