@@ -33,7 +33,8 @@ OFFSET_COLUMNS = {"percent_mapped": "area (%)", "percent_mapped_absolute": "area
                   "offset_x": "offset x (m)", "offset_y": "offset y (m)", "offset_z": "offset z (m)"}
 POSE_COLUMNS = {f"pose_{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k, text in
                 (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
-                 ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"))}
+                 ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"),
+                 ("poses", "poses compared"))}
 
 
 def label(name: str) -> str:
