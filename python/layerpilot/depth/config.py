@@ -46,7 +46,8 @@ class MatchConfig:
     uniqueness_ratio: int = 10  # percent
     speckle_window: int = 100  # pixels at matching scale
     speckle_range: int = 2  # disparity units (OpenCV multiplies by 16)
-    lr_max_diff: float = 1.0  # left-right consistency tolerance in pixels (rounded up: SGBM checks whole pixels)
+    lr_check: str = "mirrored"  # left-right consistency: "mirrored" pair matched again, or "sgbm" (its own, one call)
+    lr_max_diff: float = 1.0  # left-right consistency tolerance in pixels ("sgbm" rounds it up to whole pixels)
     min_texture: float = 1.0  # grey-level standard deviation in the block around a pixel (0 = off)
     max_disparity_step: float = 1.0  # drop pixels whose 3x3 neighbourhood spans more (0 = off)
     edge_margin: int = 8  # pixels dropped along the border of the valid rectified area
@@ -65,6 +66,8 @@ class MatchConfig:
         check_range("uniqueness_ratio", self.uniqueness_ratio, 0, 100)
         check_range("speckle_window", self.speckle_window, 0)
         check_range("speckle_range", self.speckle_range, 0)
+        if self.lr_check not in ("mirrored", "sgbm"):
+            raise ConfigError(f"lr_check = {self.lr_check!r}: expected mirrored or sgbm")
         check_range("lr_max_diff", self.lr_max_diff, 0.0)
         check_range("min_texture", self.min_texture, 0.0)
         check_range("max_disparity_step", self.max_disparity_step, 0.0)
@@ -162,8 +165,8 @@ NEAR_FACTOR = 2.5  # 48 disparities at 320 px: 2.5 x 0.12 x 160 = 48
 
 # Measured matcher settings per image width (docs/depth.md); num_disparities is derived.
 MATCH = {
-    640: MatchConfig(scale=0.75, block_size=5, edge_margin=6),
-    320: MatchConfig(scale=1.0, block_size=3, min_texture=0.5, edge_margin=4),
+    640: MatchConfig(scale=0.75, block_size=5, edge_margin=6, lr_check="sgbm"),
+    320: MatchConfig(scale=1.0, block_size=3, min_texture=0.5, edge_margin=4, lr_check="sgbm"),
 }
 
 

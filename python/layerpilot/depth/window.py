@@ -37,7 +37,7 @@ class WindowConfig:
     gnss_sigma_h: float = 2.0  # m, position prior per axis
     gnss_sigma_v: float = 4.0
     tilt_sigma_deg: float = 1.0  # attitude prior: roll and pitch ...
-    yaw_sigma_deg: float = 3.0  # ... and heading
+    yaw_sigma_deg: float = 10.0  # ... and heading: a bias does not average out over the window, GNSS's track sees it
     loss_scale: float = 3.0  # residuals beyond this many sigmas are down-weighted (soft L1)
 
     def __post_init__(self) -> None:

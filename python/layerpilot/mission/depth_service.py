@@ -36,7 +36,7 @@ class DepthServiceConfig:
     window: int = 20  # keyframes adjusted together
     gnss_sigma_h: float = 2.0  # m: how far the reported position may be off, per horizontal axis ...
     gnss_sigma_v: float = 4.0  # ... and vertically
-    yaw_sigma_deg: float = 3.0  # deg: how far the reported heading may be off
+    yaw_sigma_deg: float = 10.0  # deg: the reported heading's prior (weak: its bias shows in the GNSS track)
     max_clock_offset: float = 0.5  # s: the camera clock's offset from the telemetry's is searched within this
 
     def __post_init__(self) -> None:
