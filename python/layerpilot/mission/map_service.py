@@ -87,8 +87,9 @@ class Volume:
     hi: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        if not all(math.isfinite(a) and math.isfinite(b) and a < b for a, b in zip(self.lo, self.hi)):
-            raise ValueError(f"volume: need finite lo < hi on every axis, got {self.lo} .. {self.hi}")
+        if len(self.lo) != 3 or len(self.hi) != 3 or not all(
+                math.isfinite(a) and math.isfinite(b) and a < b for a, b in zip(self.lo, self.hi)):
+            raise ValueError(f"volume: need lo < hi, finite, on each of x, y, z; got {self.lo} .. {self.hi}")
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """A bool per point (N, 3): within the box."""
