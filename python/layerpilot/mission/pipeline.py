@@ -73,7 +73,8 @@ class MissionPipeline:
         home = tuple(float(c) for c in mission.decide.home)
         self._where = {v: (home[0], home[1], 0.0) for v in mission.vehicles}  # each vehicle's newest position
         # how far from its drone a pilot's tick reads: the map sends that in full
-        self._reach = (next(iter(self.pilots.values())) if self.pilots else build_pilot(mission)).layer_reach
+        self._reach = ((next(iter(self.pilots.values())) if self.pilots else build_pilot(mission)).layer_reach
+                       if "map" in self.roles else 0.0)
 
     def _need(self, role: str) -> None:
         if role not in self.roles:
@@ -99,8 +100,7 @@ class MissionPipeline:
         offset). Apart from ``pose``: a driver that runs the depth step on a worker feeds it there, in order."""
         self._need("depth")
         self._check(vehicle, self.depth)
-        if hasattr(self.depth[vehicle], "push_pose"):
-            self.depth[vehicle].push_pose(stamp, pose)
+        self.depth[vehicle].push_pose(stamp, pose)
 
     def frame(self, vehicle: str, frame: CameraFrame) -> PointCloud | None:
         """A camera frame -> its map-frame cloud (None: no partner yet, skipped, no points)."""
@@ -118,10 +118,14 @@ class MissionPipeline:
 
     def layers(self, vehicle: str) -> LayerView:
         """The layer set the map publishes for ``vehicle``."""
+        return LayerView(self.map.columns(), self.map.last_stamp, self.detail(vehicle))
+
+    def detail(self, vehicle: str) -> GridWindow:
+        """The cells of ``vehicle``'s layer set sent in full: what its pilot reads around its newest pose."""
         self._need("map")
         self._check(vehicle, self.mission.vehicles)
         x, y, _ = self._where[vehicle]
-        return LayerView(self.map.columns(), self.map.last_stamp, self.map.detail(x, y, self._reach))
+        return self.map.detail(x, y, self._reach)
 
     def tick(self, vehicle: str, stamp: float, columns: ColumnLayers | None, *, battery: float = math.nan,
              avoid: Sequence[Sequence[float]] = (), yield_to: Sequence[Sequence[float]] = ()) -> Command | None:

@@ -36,10 +36,11 @@ from layerpilot.bus.session import publish
 from layerpilot.decide.maker import TickTerms
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
-from layerpilot.mission.build import build_pilot, geofence_for
+from layerpilot.mission.build import geofence_for
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.config import Mission
 from layerpilot.mission.pilot import Command
+from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.nodes.supervise import Supervisor
 
 _log = logging.getLogger("layerpilot.decide")
@@ -93,7 +94,8 @@ class DecideNode:
         without ``resume``."""
         self.session, self.keys, self.mission = session, keys.Keys(vehicle), mission
         self._fence = geofence_for(mission)
-        self.pilot = build_pilot(mission)
+        self.pipeline = MissionPipeline(mission, {"decide"}, [vehicle])
+        self.pilot = self.pipeline.pilots[vehicle]
         self.mission_id = mission_id
         self.state_path = survey.state_file(mission.decide.state, vehicle) if mission.decide.state else None
         self.continued = bool(mission_id and self.state_path is not None  # also under --resume: a restart
@@ -226,8 +228,9 @@ class DecideNode:
                 self._first_stamp = state.stamp
             # the drain is measured in flight: a charge read on the ground, disarmed, would dilute it
             charge = state.battery if state.armed else math.nan
-            command = self.pilot.step(state.position, state.stamp, columns, avoid=avoid, yield_to=yield_to,
-                                      battery=charge)
+            self.pipeline.pose(self.keys.vehicle, state.stamp, state.pose)
+            command = self.pipeline.tick(self.keys.vehicle, state.stamp, columns, avoid=avoid, yield_to=yield_to,
+                                         battery=charge)
         except INPUT_ERRORS as exc:  # e.g. the layer window misses the area of interest: wait for the next one
             self.rejects.reject(self.keys.layers, BadMessage(f"decision failed ({type(exc).__name__})", str(exc)))
             with self._cond:

@@ -17,7 +17,7 @@ from layerpilot.bus.guard import guarded
 from layerpilot.bus.messages import CloudMessage, FrameMessage, State, decode_frame, decode_state, encode_cloud
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
-from layerpilot.mission.build import build_depth_service
+from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.mission.config import Mission
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.supervise import Supervisor
@@ -35,7 +35,8 @@ class DepthNode:
         self.supervisor = supervisor or Supervisor(_log)
         self.rejects = Rejects(_log)
         self.queue: DropOldest[FrameMessage] = DropOldest(self.cfg.queue_size)
-        self.service = build_depth_service(mission)
+        self.pipeline = MissionPipeline(mission, {"depth"}, [vehicle])
+        self.service = self.pipeline.depth[vehicle]
         self.poses: deque[State] = deque(maxlen=POSE_BACKLOG)  # appended by Zenoh's thread, drained by the worker
         self._subs: list = []
         self._status: dict = {}  # the service's stats after the last frame (written by the worker only)
@@ -69,11 +70,11 @@ class DepthNode:
         while self.poses:
             state = self.poses.popleft()
             try:
-                self.service.push_pose(state.stamp, state.pose)
+                self.pipeline.telemetry(self.keys.vehicle, state.stamp, state.pose)
             except ValueError as exc:
                 self.rejects.reject(self.keys.pose, BadMessage("bad pose", str(exc)))
         try:
-            cloud = self.service.push(frame.frame)
+            cloud = self.pipeline.frame(self.keys.vehicle, frame.frame)
         except ValueError as exc:  # the frame's fault (shape, pose): rejected with the reason
             self.rejects.reject(self.keys.camera, BadMessage("bad frame", str(exc)))
             return True

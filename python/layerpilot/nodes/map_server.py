@@ -30,9 +30,10 @@ from layerpilot.bus.messages import CloudMessage, State, decode_cloud, decode_st
 from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
-from layerpilot.mission.build import build_pilot, map_volume
+from layerpilot.mission.build import map_volume
 from layerpilot.mission.config import Mission
 from layerpilot.mission.map_service import COLUMN_LAYERS, CloudRefused, MapService
+from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.supervise import Supervisor
 
@@ -50,7 +51,9 @@ class MapServer:
         self.vehicles = tuple(mission.vehicles)
         self.rejects = Rejects(_log)
         self.queue: DropOldest[CloudMessage] = DropOldest(self.cfg.queue_size)
-        self.service = MapService.start(self.cfg, map_volume(mission))  # clouds reach the mission's area only
+        # clouds reach the mission's area only
+        self.pipeline = MissionPipeline(mission, {"map"}, map_service=MapService.start(self.cfg, map_volume(mission)))
+        self.service = self.pipeline.map
         self.layer_sets_published = 0
         self.queries_answered = 0
         self.snapshots_written = 0
@@ -61,9 +64,6 @@ class MapServer:
         self._next_publish = time.monotonic()
         self._layer_cache: dict[tuple, tuple[int, bytes]] = {}  # window -> (map revision, encoded layer set)
         self._layer_cache_lock = threading.Lock()
-        self._reach = build_pilot(mission).layer_reach  # how far from its drone a pilot's tick reads
-        home = (float(mission.decide.home[0]), float(mission.decide.home[1]))
-        self._where = {v: home for v in self.vehicles}  # each vehicle's newest (x, y): its layer set's centre
 
     @property
     def map(self):
@@ -105,15 +105,15 @@ class MapServer:
         self.queue.put(cloud)
 
     def _on_pose(self, state: State, key: str) -> None:
-        if state.vehicle in self._where:  # other vehicles' poses are not ours to serve
-            self._where[state.vehicle] = (float(state.pose.position[0]), float(state.pose.position[1]))
+        if state.vehicle in self.vehicles:  # other vehicles' poses are not ours to serve
+            self.pipeline.pose(state.vehicle, state.stamp, state.pose)
 
     def _insert_one(self) -> bool:
         if (message := self.queue.get(timeout=WAIT)) is None:
             return not self.queue.closed
         c = message.cloud
         try:
-            self.service.insert(c.points, c.origin, c.colors, c.stamp, message.max_range or None)
+            self.pipeline.cloud(message.vehicle, c, message.max_range or None)
         except ValueError as exc:  # the cloud's fault (shape, NaN origin, a cost limit): rejected with the reason
             kind = exc.kind if isinstance(exc, CloudRefused) else "insert failed"
             self.rejects.reject(f"{keys.PREFIX}/{message.vehicle}/cloud", BadMessage(kind, str(exc)))
@@ -132,8 +132,8 @@ class MapServer:
         names = names or self.cfg.layers
         revision = self.service.clouds_inserted  # read first: a cloud landing meanwhile makes the next ask miss
         near = None
-        if x is None and y is None and w is None and h is None and vehicle in self._where:
-            near = self.service.detail(*self._where[vehicle], self._reach)
+        if x is None and y is None and w is None and h is None and vehicle in self.vehicles:
+            near = self.pipeline.detail(vehicle)
         key = (vehicle, x, y, w, h, names, near)
         with self._layer_cache_lock:
             hit = self._layer_cache.get(key)
