@@ -101,6 +101,7 @@ def test_pose_errors_remove_the_offset_and_measure_the_rest() -> None:
 def test_a_mission_scorer_follows_a_wandering_offset(scan: np.ndarray) -> None:
     """Sample after sample the search starts from the last offset (steps of 2 and 1 voxels)."""
     truth, scorer = _map(scan, (0, 0, 0)), _scorer()
+    assert scorer(VoxelMap(0.5), truth, now=0.0)["offset_x"] == 0.0 and not scorer.searched  # nothing mapped yet
     for drift in [(0.0, 0.0, 0.0), (1.0, -0.5, 0.5), (2.5, -1.0, 1.0), (4.0, -2.0, 0.0), (1.0, 0.0, 0.0)]:
         scores = scorer(_map(scan[::3], drift), truth, now=5.0)
         assert [scores[k] for k in ("offset_x", "offset_y", "offset_z")] == list(drift)

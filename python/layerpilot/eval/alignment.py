@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -113,7 +113,8 @@ class MapScorer:
     box_max: np.ndarray
     d_v: float = D_V
     min_occupancy: float = ABOVE_GT
-    offset: np.ndarray | None = None  # the last one found; None before the first search
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the last one the scores used
+    searched: bool = False  # once maps had something to align, searches start from ``offset``
 
     names = SCORE_NAMES
 
@@ -129,7 +130,9 @@ class MapScorer:
             raise ValueError(f"gt_map: resolution {gt_map.resolution} != est_map's {est_map.resolution}")
         gt = gt_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
         est = est_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
-        self.offset = best_offset(est, gt, est_map.resolution, start=self.offset, cap=self.d_v)
+        if len(est) and len(gt):  # the first search with something to align is the coarse one
+            self.offset = best_offset(est, gt, est_map.resolution, self.offset if self.searched else None, self.d_v)
+            self.searched = True
         absolute = self._metrics(est_map, gt, now, np.zeros(3))
         aligned = absolute if not self.offset.any() else self._metrics(est_map, gt, now, self.offset)
         return {**aligned, **{f"{k}_absolute": v for k, v in absolute.items()},
