@@ -35,13 +35,15 @@ def register(commands: argparse._SubParsersAction) -> None:
                         "same run, by this node before a crash, is continued; another run's is not")
 
     p = add_node_command(commands, "camera", _camera,
-                         "a real camera's frames on the bus: device, stream or video file, posed from the link's poses",
+                         "a real camera's frames on the bus: device, stream or video file, posed from the link's "
+                         "poses; or a folder of geotagged photos played as camera and telemetry",
                          flags={"source": "camera.source", "calibration": "camera.calibration",
                                 "file_start": "camera.file_start"})
-    p.add_argument("--source", help="device index (0), stream URL (rtsp://...) or video file (default: camera.source)")
+    p.add_argument("--source", help="device index (0), stream URL (rtsp://...), video file or photo folder "
+                                    "(default: camera.source)")
     p.add_argument("--calibration", help="OpenCV YAML calibration file (default: camera.calibration)")
-    p.add_argument("--file-start", type=float, help="mission time (s) of a video file's first frame "
-                                                    "(default: camera.file_start)")
+    p.add_argument("--file-start", type=float, help="mission time (s) of a video file's first frame or a photo "
+                                                    "folder's first photo (default: camera.file_start)")
 
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
