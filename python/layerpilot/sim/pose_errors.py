@@ -2,7 +2,11 @@
 
 Each error is a first-order Gauss-Markov process started from its stationary
 distribution, so its statistics hold from the first step: standard deviation sigma,
-autocorrelation exp(-|dt| / tau). Barometric drift grows linearly with time.
+autocorrelation exp(-|dt| / tau). Position errors are in addition low-passed over a few
+seconds, as the receiver's and the EKF's filters smooth them (a first-order process
+alone would move like a random walk from one 10 Hz report to the next, which no EKF
+output does); their standard deviation stays sigma and their autocorrelation is
+exp(-|dt| / tau) beyond a few smoothing times. Barometric drift grows linearly with time.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import expm
 
 from layerpilot.sim.sensors import SensorProfile
 
@@ -26,6 +31,39 @@ class GaussMarkov:
         a = math.exp(-dt / self.tau)
         self.value = a * self.value + self.sigma * math.sqrt(1.0 - a * a) * self._rng.normal(0.0, 1.0, self.value.size)
         return self.value
+
+
+class SmoothedGaussMarkov:
+    """A Gauss-Markov process x (time constant tau) through a first-order low-pass y (time constant
+    ``smoothing``), scaled so that y's stationary standard deviation is sigma. Stepped exactly for any dt:
+    s(t + dt) = Phi s(t) + w, Phi = expm(A dt), cov(w) = P - Phi P Phi^T with P the stationary covariance."""
+
+    def __init__(self, sigma: float, tau: float, smoothing: float, rng: np.random.Generator, size: int = 1) -> None:
+        self._rng = rng
+        self._a = np.array([[-1.0 / tau, 0.0], [1.0 / smoothing, -1.0 / smoothing]])
+        var_x = sigma ** 2 * (tau + smoothing) / tau  # var(y) = var(x) tau / (tau + smoothing)
+        cov_xy = var_x * tau / (tau + smoothing)
+        self._p = np.array([[var_x, cov_xy], [cov_xy, sigma ** 2]])  # solves A P + P A^T + Q = 0
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._state = _draw(self._p, rng, size)  # (2, size): rows x, y
+
+    @property
+    def value(self) -> np.ndarray:
+        return self._state[1]
+
+    def step(self, dt: float) -> np.ndarray:
+        if dt not in self._steps:
+            phi = expm(self._a * dt)
+            self._steps[dt] = (phi, self._p - phi @ self._p @ phi.T)
+        phi, q = self._steps[dt]
+        self._state = phi @ self._state + _draw(q, self._rng, self._state.shape[1])
+        return self.value
+
+
+def _draw(cov: np.ndarray, rng: np.random.Generator, size: int) -> np.ndarray:
+    """``size`` samples (as columns) of N(0, cov) for a 2x2 covariance, also when it is (nearly) singular."""
+    w, v = np.linalg.eigh(cov)
+    return (v * np.sqrt(np.clip(w, 0.0, None))) @ rng.normal(0.0, 1.0, (2, size))
 
 
 @dataclass(frozen=True)
@@ -46,8 +84,8 @@ class PoseErrors:
     def __init__(self, profile: SensorProfile, rng: np.random.Generator) -> None:
         p = self.profile = profile
         self._rng = rng
-        self._horizontal = GaussMarkov(p.horizontal_sigma_m, p.horizontal_tau_s, rng, 2)
-        self._vertical = GaussMarkov(p.vertical_sigma_m, p.vertical_tau_s, rng)
+        self._horizontal = SmoothedGaussMarkov(p.horizontal_sigma_m, p.horizontal_tau_s, p.position_smoothing_s, rng, 2)
+        self._vertical = SmoothedGaussMarkov(p.vertical_sigma_m, p.vertical_tau_s, p.position_smoothing_s, rng)
         self._tilt = GaussMarkov(math.radians(p.tilt_sigma_deg), p.tilt_tau_s, rng, 2)
         self._heading = GaussMarkov(math.radians(p.heading_sigma_deg), p.heading_tau_s, rng)
         self._baro_rate = p.baro_drift_m_per_min / 60.0 * (1.0 if rng.random() < 0.5 else -1.0)

@@ -62,6 +62,7 @@ class SensorProfile:
     horizontal_white_m: float = 0.0    # white noise on top, per axis and per EKF output
     vertical_sigma_m: float = 0.0      # vertical Gauss-Markov error
     vertical_tau_s: float = 120.0
+    position_smoothing_s: float = 2.0  # the receiver's and EKF's low-pass on the position error
     baro_drift_m_per_min: float = 0.0  # barometric height drift (its sign is drawn from the seed)
     tilt_sigma_deg: float = 0.0        # roll and pitch error each, Gauss-Markov
     tilt_tau_s: float = 30.0
@@ -84,6 +85,7 @@ class SensorProfile:
             check_range(name, getattr(self, name), 0.0, 100.0)
         for name in ("horizontal_tau_s", "vertical_tau_s", "tilt_tau_s", "heading_tau_s"):
             check_range(name, getattr(self, name), 0.1, 1e5)
+        check_range("position_smoothing_s", self.position_smoothing_s, 0.1, 60.0)
         check_range("baro_drift_m_per_min", self.baro_drift_m_per_min, 0.0, 10.0)
         check_range("tilt_sigma_deg", self.tilt_sigma_deg, 0.0, 10.0)
         check_range("heading_sigma_deg", self.heading_sigma_deg, 0.0, 45.0)
@@ -121,7 +123,7 @@ PROFILES: dict[str, SensorProfile] = {
                               heading_bias_deg=2.0, clock_offset_s=0.1, clock_jitter_s=0.01,
                               trigger_jitter_s=0.02, exposure_s=0.004, exposure_sigma_ev=0.15, noise_std=2.0,
                               jpeg_quality=85, k1=-0.05, k2=0.01, calibration_error=0.02),
-    "degraded": SensorProfile(horizontal_sigma_m=3.5, horizontal_white_m=0.3, vertical_sigma_m=6.0,
+    "degraded": SensorProfile(horizontal_sigma_m=3.5, horizontal_white_m=0.15, vertical_sigma_m=6.0,
                               baro_drift_m_per_min=0.6, tilt_sigma_deg=1.0, heading_sigma_deg=5.0,
                               heading_bias_deg=5.0, clock_offset_s=0.25, clock_jitter_s=0.03,
                               trigger_jitter_s=0.04, exposure_s=0.015, exposure_sigma_ev=0.3, noise_std=5.0,
