@@ -14,8 +14,8 @@ from layerpilot.geometry import CameraFrame
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.connection import open_connection
 from layerpilot.link.frames import map_to_local_ned, yaw_enu_to_ned
-from layerpilot.mission.config import load_mission
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.missionfile import load_mission
+from layerpilot.camera import CameraConfig, camera_pose
 from layerpilot.sim.camera_errors import CameraErrors, lens_maps
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.pose_errors import PoseErrors
@@ -70,6 +70,14 @@ def test_consumer_pose_error_std_and_correlation_time_match_the_profile():
     rates = np.abs(s["baro"][:, -1]) / 1800.0 * 60.0
     assert np.allclose(rates, CONSUMER.baro_drift_m_per_min)
     assert 0.3 < np.mean(s["baro"][:, -1] > 0) < 0.7
+
+
+def test_the_position_error_moves_smoothly_between_reports():
+    """Low-passed: between 10 Hz reports the drift moves ~1 cm, not the 7 cm of a first-order process."""
+    errors = PoseErrors(CONSUMER, np.random.default_rng([0, 1]))
+    drift = np.array([errors.step(0.1).drift[:2] for _ in range(3000)])
+    assert np.diff(drift, axis=0).std() < 0.03
+    assert drift.std() > 0.5  # while it wanders by metres
 
 
 def test_consumer_is_at_least_as_hard_as_an_m8_class_receiver():
