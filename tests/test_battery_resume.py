@@ -34,7 +34,7 @@ from layerpilot.mission import resume as survey
 from layerpilot.layers import compute_layers
 from layerpilot.mission.build import build_pilot
 from layerpilot.mission.clock import MissionClock
-from layerpilot.mission.config import Override, load_mission
+from layerpilot.missionfile import Override, load_mission
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
 from layerpilot.mission.pilot import Pilot, PilotConfig, load_pilot_behavior
@@ -113,10 +113,10 @@ def test_the_survey_is_saved_and_a_fresh_pilot_continues_it(flown, tmp_path):
     mission, out, result = flown
     state = json.loads((out / "survey.json").read_text())
     # the pilot that flew, rebuilt by replaying its inputs (as the replay test does): what resume must equal
-    flew = build_pilot(mission)
+    flew = build_pilot(mission.core)
     for step in result.pilot_inputs:
         flew.step(step.position, step.time, to_column_layers(decode_layer_set(step.layer_set)))
-    resumed = build_pilot(mission)
+    resumed = build_pilot(mission.core)
     survey.load(resumed, out / "survey.json")
     assert resumed.seq == flew.seq + 1 == state["seq"]  # + the battery return
     assert resumed.reached == state["reached"] >= 3 and len(resumed.ticks) == len(flew.ticks) >= 4
@@ -162,12 +162,12 @@ def test_an_after_time_phase_counts_on_the_mission_clock_after_a_resume(flown, t
         "after_coverage = 0.85", "after_time = 60.0"))
     mission = load_mission("default", [Override("--behavior", "decide.behavior", str(behavior)),
                                        Override("--state", "decide.state", str(tmp_path / "state"))])
-    survey.save(build_pilot(mission), survey.state_file(tmp_path / "state", "uav1"), 50.0, 45.0)
+    survey.save(build_pilot(mission.core), survey.state_file(tmp_path / "state", "uav1"), 50.0, 45.0)
     clock = survey.clock_after(tmp_path / "state", mission.vehicles)
     service = MapService(mission.map_server, VoxelMap.load(out / "map.ot"))
     phases = {}
     for name, stamp in (("mission clock", clock(10.0)), ("vehicle clock", 10.0)):
-        pilot = build_pilot(mission)
+        pilot = build_pilot(mission.core)
         survey.load(pilot, survey.state_file(tmp_path / "state", "uav1"))
         command = pilot.step((0.0, 0.0, 50.0), stamp, service.columns(), battery=1.0)
         phases[name] = (pilot.maker.schedule.phase, command.decision.weights)
@@ -176,18 +176,18 @@ def test_an_after_time_phase_counts_on_the_mission_clock_after_a_resume(flown, t
 
 def test_resume_keeps_the_schedule_phase_and_refuses_what_it_cannot_use(tmp_path):
     mission = load_mission("default", [Override("--behavior", "decide.behavior", "explore-then-patrol")])
-    pilot = build_pilot(mission)
+    pilot = build_pilot(mission.core)
     pilot.maker.schedule.phase = 1  # past "explore until 85 % observed"
     survey.save(pilot, tmp_path / "uav1.json", 100.0, 100.0)
-    fresh = build_pilot(mission)
+    fresh = build_pilot(mission.core)
     assert survey.load(fresh, tmp_path / "uav1.json")["flown_s"] == 100.0 and fresh.maker.schedule.phase == 1
     with pytest.raises(ValueError, match="saved by behavior 'explore-then-patrol', the mission flies 'balanced'"):
-        survey.load(build_pilot(load_mission("default")), tmp_path / "uav1.json")
+        survey.load(build_pilot(load_mission("default").core), tmp_path / "uav1.json")
     (tmp_path / "bad.json").write_text('{"version": 1, "behav')
     with pytest.raises(ValueError, match="bad.json: damaged mission state"):
-        survey.load(build_pilot(mission), tmp_path / "bad.json")
+        survey.load(build_pilot(mission.core), tmp_path / "bad.json")
     with pytest.raises(ValueError, match="none.json: no saved mission state to resume"):
-        survey.load(build_pilot(mission), tmp_path / "none.json")
+        survey.load(build_pilot(mission.core), tmp_path / "none.json")
 
 
 def test_up_resume_without_a_saved_survey_says_so(tmp_path):
@@ -204,7 +204,7 @@ def test_up_resume_starts_the_sim_and_link_nodes_on_the_saved_mission_clock(tmp_
     the vehicles'), and one mission id for every decide node (so that a restarted one continues)."""
     mission = load_mission("default", [Override("--state", "decide.state", str(tmp_path / "state"))])
     for vehicle, time in (("uav1", 38.5), ("uav2", 41.25)):
-        survey.save(build_pilot(mission), survey.state_file(tmp_path / "state", vehicle), time, time - 5.0)
+        survey.save(build_pilot(mission.core), survey.state_file(tmp_path / "state", vehicle), time, time - 5.0)
     start = survey.clock_after(tmp_path / "state", ["uav1", "uav2"]).start
     nodes = {n.name: n.argv for n in node_commands(tmp_path / "m.toml", ["uav1", "uav2"], None, resume=True,
                                                     clock_start=start, mission_id="run7")}
@@ -227,7 +227,7 @@ def test_a_new_survey_keeps_another_runs_saved_state_as_bak(tmp_path, caplog):
     uav1.json.bak and says so once; a node restarted within the same run continues its predecessor's state."""
     mission = load_mission("default", [Override("--state", "decide.state", str(tmp_path / "state"))])
     path = survey.state_file(tmp_path / "state", "uav1")
-    survey.save(build_pilot(mission), path, 38.5, 33.5, "run1")
+    survey.save(build_pilot(mission.core), path, 38.5, 33.5, "run1")
     saved, bak = path.read_text(), tmp_path / "state" / "uav1.json.bak"
     with open_session(BusConfig(endpoint=free_endpoint())) as session:
         assert DecideNode(session, "uav1", mission, mission_id="run1").continued  # a restart: nothing set aside

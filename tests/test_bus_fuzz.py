@@ -16,7 +16,7 @@ from layerpilot.bus.reject import BadMessage
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
 from layerpilot.grid import GridGeometry
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.nodes.map_server import MapServer

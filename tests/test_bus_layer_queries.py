@@ -12,7 +12,7 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.grid import GridGeometry
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.nodes.map_server import MapServer
 from test_nodes_map_server import ground_cloud

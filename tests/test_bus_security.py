@@ -19,7 +19,7 @@ from layerpilot.bus.security import (JoinRefused, access_control, client_endpoin
                                      open_hub, open_node_session)
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.config import ConfigError
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.nodes.map_server import MapServer
 

@@ -14,7 +14,8 @@ from layerpilot.depth.evaluate import score
 from layerpilot.eval.fixtures import sideways_flight
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, Pose
 from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
+from layerpilot.camera import CameraConfig
+from layerpilot.sim import Renderer, World, WorldConfig
 
 
 def upscaled(frame: CameraFrame, width: int, height: int) -> CameraFrame:

@@ -10,7 +10,8 @@ from layerpilot.depth.config import preset_for
 from layerpilot.depth.evaluate import score
 from layerpilot.eval.fixtures import sideways_flight, terrain_scene_depth
 from layerpilot.map import VoxelMap
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
+from layerpilot.camera import CameraConfig
+from layerpilot.sim import Renderer, World, WorldConfig
 
 
 @pytest.fixture(scope="module")

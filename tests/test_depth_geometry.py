@@ -10,7 +10,7 @@ from layerpilot.depth.backproject import camera_points_to_cloud
 from layerpilot.depth.evaluate import score
 from layerpilot.eval.fixtures import noise_texture, plane_frame
 from layerpilot.geometry import CameraFrame, CameraIntrinsics
-from layerpilot.sim.camera import camera_pose
+from layerpilot.camera import camera_pose
 
 SIZE = (640, 480)
 ALT = 30.0

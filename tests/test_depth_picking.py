@@ -9,7 +9,7 @@ import pytest
 from layerpilot.depth import FramePicker, PickConfig
 from layerpilot.eval.fixtures import noise_texture
 from layerpilot.geometry import CameraFrame, CameraIntrinsics
-from layerpilot.sim.camera import camera_pose
+from layerpilot.camera import camera_pose
 
 K = CameraIntrinsics.from_fov(160, 120, 60.0)
 IMAGE = cv2.resize(noise_texture(256, seed=1), (160, 120), interpolation=cv2.INTER_AREA)

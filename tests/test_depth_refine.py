@@ -17,8 +17,9 @@ from layerpilot.depth.stereo import StereoMatcher
 from layerpilot.eval.fixtures import PairSpec, render_pair, sideways_flight
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
-from layerpilot.sim.camera import camera_pose
+from layerpilot.camera import CameraConfig
+from layerpilot.sim import Renderer, World, WorldConfig
+from layerpilot.camera import camera_pose
 
 SIZE = (320, 240)
 

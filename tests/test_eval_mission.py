@@ -8,7 +8,7 @@ import numpy as np
 
 from layerpilot.eval.mission import run_mission
 from layerpilot.eval.series import MetricSeries
-from layerpilot.mission.config import Override, load_mission
+from layerpilot.missionfile import Override, load_mission
 
 SHORT = load_mission("default", [Override("--duration", "evaluation.duration", 20.0),
                                  Override("--step", "evaluation.step_s", 0.1),

@@ -7,7 +7,7 @@ import pytest
 
 from layerpilot.geometry import (CameraFrame, CameraIntrinsics, PointCloud, Pose, matrix_from_quat, quat_from_euler,
                                  quat_from_matrix)
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 
 rng = np.random.default_rng(3)
 

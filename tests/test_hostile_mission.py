@@ -32,7 +32,8 @@ from layerpilot.bus.session import BusConfig, free_endpoint
 from layerpilot.eval.fixtures import sideways_flight
 from layerpilot.geometry import PointCloud, Pose
 from layerpilot.grid import GridGeometry
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
+from layerpilot.camera import CameraConfig
+from layerpilot.sim import Renderer, World, WorldConfig
 from conftest import balanced_behavior, free_tcp_port, operator_session, start_up, stop_up
 from test_bus_fuzz import GOOD, mutations
 from test_depth_downscale import upscaled

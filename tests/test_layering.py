@@ -20,8 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "python" / "layerpilot"
 
 # Top to bottom; a package may import only the rows below its own.
-ROWS = [{"cli"}, {"bench"}, {"eval"}, {"viz"}, {"nodes"}, {"mission"}, {"bus"}, {"photos"},
-        {"decide", "depth", "sim"}, {"layers", "link"}, {"map"},
+ROWS = [{"cli"}, {"bench"}, {"eval"}, {"viz"}, {"nodes"}, {"missionfile"}, {"bus", "sim"}, {"mission"}, {"photos"},
+        {"decide", "depth"}, {"layers", "link"}, {"map"}, {"camera"},
         {"grid", "config", "progress", "geometry", "geodesy"}]
 
 

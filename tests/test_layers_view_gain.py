@@ -11,7 +11,7 @@ from layerpilot.grid import GridGeometry
 from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.layers.view_gain import CameraView, footprint, view_gain
 from layerpilot.map.columns import ColumnLayers
-from layerpilot.sim.camera import CameraConfig, camera_pose, pixel_rays
+from layerpilot.camera import CameraConfig, camera_pose, pixel_rays
 
 CAMERA = CameraConfig(width=320, height=240, hfov_deg=90.0, pitch_deg=60.0)
 VFOV = math.degrees(2 * math.atan(math.tan(math.radians(45.0)) * 240 / 320))

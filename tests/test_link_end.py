@@ -22,7 +22,7 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.config import ConfigError
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, LinkError, NotReady
-from layerpilot.mission.config import load_mission
+from layerpilot.missionfile import load_mission
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 

@@ -20,8 +20,8 @@ from layerpilot.link.config import LinkConfig
 from layerpilot.link.frames import enu_to_ned
 from layerpilot.link.geofence import Geofence, OutsideGeofence
 from layerpilot.link.link import FlightLink, WaypointRefused
-from layerpilot.mission.build import geofence_for
-from layerpilot.mission.config import load_mission
+from layerpilot.missionfile import geofence_for
+from layerpilot.missionfile import load_mission
 from layerpilot.sim.mavlink_vehicle import EndpointConfig, MavlinkVehicle
 from layerpilot.sim.vehicle import Multicopter
 

@@ -25,7 +25,7 @@ from layerpilot.link.connection import open_connection
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import ControlLost, FlightLink, LinkError
 from layerpilot.mission.clock import MissionClock
-from layerpilot.mission.config import LinkSettings, load_mission
+from layerpilot.missionfile import LinkSettings, load_mission
 from layerpilot.nodes.link import LinkNode
 from layerpilot.sim.mavlink_vehicle import FORCE_DISARM_MAGIC, MavlinkVehicle
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from layerpilot.mission.build import map_volume
-from layerpilot.mission.config import load_mission
+from layerpilot.missionfile import load_mission
 from layerpilot.mission.map_service import MAX_RAY_STEPS, CloudRefused, MapService, MapServiceConfig, Volume
 
 ORIGIN = np.array([0.0, 0.0, 50.0])
@@ -36,7 +36,7 @@ def test_a_cloud_max_range_only_lowers_the_services():
 
 def test_the_120_kb_cloud_costs_little_and_leaves_the_map_intact():
     """10,000 points over +-5 km with max_range = 1e7 (offline 1,000 such points took 4 s and ~800 MB)."""
-    s = service(map_volume(load_mission("default")))
+    s = service(map_volume(load_mission("default").core))
     honest = rng.uniform([-30, -30, 0], [30, 30, 5], (5000, 3)).astype(np.float32)
     s.insert(honest, ORIGIN, None, 1.0, 100.0)
     before = s.map.stats()
@@ -63,7 +63,7 @@ def test_without_a_volume_the_ray_cap_alone_bounds_the_cloud():
 
 
 def test_an_origin_outside_the_volume_is_refused_and_the_map_unchanged():
-    s = service(map_volume(load_mission("default")))
+    s = service(map_volume(load_mission("default").core))
     with pytest.raises(CloudRefused, match="origin .* outside the mission's volume") as err:
         s.insert(np.zeros((10, 3), np.float32), np.array([5000.0, 0.0, 50.0]), None, 1.0)
     assert err.value.kind == "outside the area"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from layerpilot.config import ConfigError
-from layerpilot.mission.config import MISSION_DIR, Mission, Override, load_mission
+from layerpilot.missionfile import MISSION_DIR, Mission, Override, load_mission
 
 
 @pytest.mark.parametrize("path", sorted(MISSION_DIR.glob("*.toml")), ids=lambda p: p.stem)

@@ -11,10 +11,10 @@ import pytest
 from layerpilot.decide.behavior import load_behavior, preset_names
 from layerpilot.map import VoxelMap
 from layerpilot.mission.build import build_pilot
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.flight import footprint_hops, vertical_fov_deg
 from layerpilot.mission.pilot import PilotConfig
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.camera import CameraConfig
 from layerpilot.sim.simulator import SimConfig
 
 CAMERA = CameraConfig(width=320, height=240, hfov_deg=90.0, pitch_deg=60.0)
@@ -36,11 +36,11 @@ def test_hop_radii_follow_the_camera_footprint() -> None:
 
 def test_a_preset_without_metres_hops_with_the_footprint_and_metres_in_a_file_win(tmp_path) -> None:
     sim = SimConfig(camera=CAMERA, frame_rate_hz=1.0)
-    balanced = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior="balanced"), sim=sim))
+    balanced = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior="balanced"), sim=sim).core)
     assert balanced.behavior.r_e == pytest.approx(28.87, abs=0.01) and balanced.behavior.r_i == pytest.approx(202.07, abs=0.02)
     path = tmp_path / "metres.toml"
     path.write_text("r_e = 12.0\nr_i = 90.0\n[weights]\nfringe = 1.0\n")
-    metres = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior=str(path)), sim=sim))
+    metres = build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior=str(path)), sim=sim).core)
     assert (metres.behavior.r_e, metres.behavior.r_i) == (12.0, 90.0)
 
 
@@ -61,7 +61,7 @@ def test_the_view_side_preset_flies_sideways_at_the_survey_speed_with_footprint_
     """What build_pilot (both drivers' pilot) makes of the preset on the default mission's camera."""
     mission = dataclasses.replace(Mission(), decide=PilotConfig(behavior="view-side"),
                                   sim=SimConfig(camera=CAMERA, frame_rate_hz=1.0))
-    pilot = build_pilot(mission)
+    pilot = build_pilot(mission.core)
     assert pilot.behavior.r_e == pytest.approx(28.87, abs=0.01) and pilot.behavior.r_i == pytest.approx(202.07, abs=0.02)
     assert pilot.cruise_speed == pytest.approx(0.09 * 50 / math.sin(math.radians(60)), rel=1e-6)  # 5.20 m/s
     assert pilot.view is not None and pilot.view.heading == "side" and pilot.view.height == 50.0

@@ -13,8 +13,9 @@ from layerpilot.depth.config import preset_for
 from layerpilot.depth.picking import FramePicker
 from layerpilot.eval.fixtures import terrain_scene_depth
 from layerpilot.mission.heading import HeadingPolicy
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
-from layerpilot.sim.camera import camera_pose
+from layerpilot.camera import CameraConfig
+from layerpilot.sim import Renderer, World, WorldConfig
+from layerpilot.camera import camera_pose
 
 SPEED = 5.2  # m/s at 1 Hz: the survey speed of this camera at 50 m (0.09 x the 57.7 m slant range)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from layerpilot.mission.patterns import footprint_width, lawnmower, orbit, path_length, survey_speed
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 
 
 def test_footprint_width_of_default_camera():

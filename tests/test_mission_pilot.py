@@ -10,7 +10,7 @@ import pytest
 from layerpilot.decide.behavior import behavior_from_dict
 from layerpilot.map import VoxelMap
 from layerpilot.mission.build import build_pilot
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.pilot import Pilot, PilotConfig
 from layerpilot.sim.simulator import SimConfig
 
@@ -46,7 +46,7 @@ def test_no_layers_no_decision_but_a_pattern_needs_none() -> None:
     pilot = Pilot(PilotConfig(), behavior_from_dict(fringe_behavior()))
     assert pilot.step((0.0, 0.0, 50.0), 0.0, None) is None
     mission = dataclasses.replace(Mission(), decide=PilotConfig(behavior="orbit"))
-    orbit = build_pilot(mission)
+    orbit = build_pilot(mission.core)
     seen = []
     position = (0.0, 0.0, 50.0)
     for k in range(2 * len(orbit.pattern)):
@@ -61,7 +61,7 @@ def test_no_layers_no_decision_but_a_pattern_needs_none() -> None:
 def test_lawnmower_flies_at_the_survey_speed_of_the_missions_camera() -> None:
     def pilot(rate: float) -> Pilot:
         return build_pilot(dataclasses.replace(Mission(), decide=PilotConfig(behavior="lawnmower"),
-                                             sim=SimConfig(frame_rate_hz=rate)))
+                                             sim=SimConfig(frame_rate_hz=rate)).core)
 
     slow, fast = pilot(1.0), pilot(2.0)
     assert fast.cruise_speed == pytest.approx(2 * slow.cruise_speed) and slow.cruise_speed > 0

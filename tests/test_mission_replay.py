@@ -15,7 +15,7 @@ from layerpilot.bus.layerset import decode_layer_set, to_column_layers
 from layerpilot.geometry import Pose
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.eval.mission import run_mission
-from layerpilot.mission.config import Override, load_mission
+from layerpilot.missionfile import Override, load_mission
 from layerpilot.nodes.decide import DecideNode, decision_message
 from conftest import wait_for
 

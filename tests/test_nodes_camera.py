@@ -21,7 +21,8 @@ from layerpilot.geometry import Pose
 from layerpilot.mission.camera_track import CameraSettings, ClockOffset, PoseTrack, slerp
 from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
 from layerpilot.nodes.camera import CameraNode
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
+from layerpilot.sim import Renderer, World, WorldConfig
 
 from conftest import cli_process, wait_for
 
@@ -330,7 +331,7 @@ def test_a_mission_with_a_real_camera_runs_the_camera_node_in_the_sim_nodes_plac
 
     from layerpilot.bus.security import grants, node_user
     from layerpilot.cli.link import link_settings
-    from layerpilot.mission.config import load_mission
+    from layerpilot.missionfile import load_mission
     from layerpilot.nodes.up import node_commands
 
     path = tmp_path / "real.toml"

@@ -14,7 +14,7 @@ from layerpilot.bus.layerset import GridLayersMessage, column_arrays, encode_lay
 from layerpilot.geometry import Pose
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.map import VoxelMap
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.pilot import PilotConfig
 from layerpilot.nodes.decide import DecideNode, decode_aggregates
 from conftest import wait_for

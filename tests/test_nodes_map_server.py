@@ -18,7 +18,7 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import PointCloud
 from layerpilot.map import VoxelMap
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.nodes.map_server import MapServer
 from conftest import cli_process, wait_for

@@ -13,7 +13,7 @@ from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import free_endpoint
 from layerpilot.mission.build import build_pilot
-from layerpilot.mission.config import load_mission
+from layerpilot.missionfile import load_mission
 from conftest import free_tcp_port, operator_session, start_up, stop_up
 
 K = Keys("uav1")
@@ -39,7 +39,7 @@ frame_rate_hz = 2.0
 width = 160
 height = 120
 """)
-    expected = build_pilot(load_mission(mission))  # the waypoints the pattern must fly, in order
+    expected = build_pilot(load_mission(mission).core)  # the waypoints the pattern must fly, in order
     up, lines = start_up(mission, ep, tmp_path / "logs")
     client = None
     try:

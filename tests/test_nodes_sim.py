@@ -13,7 +13,7 @@ from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.geometry import Pose
 from layerpilot.nodes.sim import CameraOnlyNode
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.camera import CameraConfig
 from layerpilot.sim.simulator import SimConfig
 from layerpilot.sim.world import World, WorldConfig
 

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig, camera_pose, pixel_rays
+from layerpilot.camera import CameraConfig, camera_pose, pixel_rays
+from layerpilot.sim import Renderer, World, WorldConfig
 
 WORLD = WorldConfig(seed=11, size=120.0, trees_per_hectare=300.0, clearings=2, tile_size=30.0)
 

@@ -8,7 +8,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.grid import GridGeometry
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 from layerpilot.sim.simulator import SimConfig, Simulator
 from layerpilot.sim.world import WorldConfig
 

@@ -14,7 +14,7 @@ from layerpilot.geometry import Pose
 from layerpilot.grid import GridGeometry, GridWindow
 from layerpilot.map.columns import ColumnLayers, observed_range
 from layerpilot.mission.build import build_pilot
-from layerpilot.mission.config import Mission, Override, load_mission
+from layerpilot.missionfile import Mission, Override, load_mission
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.mission.pilot import PilotConfig
 from layerpilot.nodes.map_server import MapServer
@@ -103,7 +103,7 @@ def test_the_map_server_publishes_the_drones_neighbourhood_and_the_pilot_decides
         assert observed_range(getattr(near, name), near.observed) != whole.value_range(name)
     assert whole.value_range("last_seen") == (1.0, 30.0)
 
-    pilots = [build_pilot(mission), build_pilot(mission)]
+    pilots = [build_pilot(mission.core), build_pilot(mission.core)]
     position, t = np.array(DRONE), 40.0
     for tick in range(2):
         commands = [pilots[0].step(position, t, whole), pilots[1].step(position, t, near)]
@@ -119,7 +119,7 @@ def test_the_map_server_publishes_the_drones_neighbourhood_and_the_pilot_decides
 def test_a_pilot_waits_for_a_set_around_it(server):
     mission, node, *_ = server
     far = wire.to_column_layers(wire.decode_layer_set(node.layer_set("uav1")))  # around the last pose heard
-    pilot = build_pilot(mission)
+    pilot = build_pilot(mission.core)
     assert pilot.step((-300.0, 200.0, 50.0), 1.0, far) is None and pilot.evaluations == 0
     assert pilot.step(DRONE, 1.0, wire.to_column_layers(_set_around(server, *DRONE[:2]))) is not None
 
@@ -167,6 +167,6 @@ def test_a_drone_beyond_the_grid_heads_for_the_area_from_either_set():
     commands = []
     for window in (None, far):
         columns = wire.to_column_layers(wire.decode_layer_set(wire.encode_columns(cl, 1.0, "uav1", None, window)))
-        commands.append(build_pilot(Mission()).step((5000.0, 5000.0, 50.0), 1.0, columns))
+        commands.append(build_pilot(Mission().core).step((5000.0, 5000.0, 50.0), 1.0, columns))
     assert commands[0].position == commands[1].position == (70.5, 70.5, 50.0)
     assert commands[0].decision.fallback == commands[1].decision.fallback == "approach"

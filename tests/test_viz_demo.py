@@ -14,7 +14,7 @@ from rerun.chunk import RrdReader
 
 from layerpilot.cli.eval import _run
 from layerpilot.decide import area_geometry
-from layerpilot.mission.config import Override, load_mission
+from layerpilot.missionfile import Override, load_mission
 from layerpilot.mission.pilot import load_pilot_behavior
 from layerpilot.viz.scene import aggregate_colors
 from conftest import balanced_behavior

@@ -6,7 +6,7 @@ import rerun as rr
 
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.viz.live import LiveView
 from layerpilot.viz.scene import MissionScene
 from conftest import wait_for

@@ -26,7 +26,7 @@ from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import decode_layer_set, encode_columns, to_column_layers
 from layerpilot.bus.session import BusConfig, free_endpoint, open_session
 from layerpilot.geometry import PointCloud
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.nodes.map_server import MapServer
 

@@ -28,7 +28,8 @@ from layerpilot.eval.fixtures import BENCH_PAIRS, render_pair, terrain_scene_dep
 def run_size(world, width: int, height: int, repeats: int) -> dict:
     import dataclasses
 
-    from layerpilot.sim import CameraConfig, Renderer
+    from layerpilot.camera import CameraConfig
+    from layerpilot.sim import Renderer
 
     config: DepthConfig = preset_for(width)
     with Renderer(world, CameraConfig(width=width, height=height)) as r:

@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from layerpilot.eval.mission import run_mission
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 
 COMPARED = ("decisions.jsonl", "map.ot", "metrics.csv")
 

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from layerpilot.mission.patterns import lawnmower
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.camera import CameraConfig
 from layerpilot.sim.world import World, WorldConfig
 
 TARGET_FPS = 8.0

@@ -119,7 +119,7 @@ def _photos(args: argparse.Namespace) -> int:
 
 def _mission(args: argparse.Namespace) -> int:
     from layerpilot.bench.mission import main
-    from layerpilot.mission.config import Override, load_mission
+    from layerpilot.missionfile import Override, load_mission
 
     mission = load_mission(args.config, [
         Override("--duration", "evaluation.duration", args.duration),

@@ -81,7 +81,7 @@ def register(commands: argparse._SubParsersAction) -> None:
 def _mission(args: argparse.Namespace):
     """The mission file with the given flags applied; errors name the flag."""
     from layerpilot.cli.nodes import mission_from_args
-    from layerpilot.mission.config import Override
+    from layerpilot.missionfile import Override
 
     camera = [] if args.camera is None else [Override("--camera", "sim.camera.width", args.camera[0]),
                                              Override("--camera", "sim.camera.height", args.camera[1])]
@@ -146,7 +146,7 @@ def _study(args: argparse.Namespace) -> None:
     import numpy as np
 
     from layerpilot.eval.summary import write_study_report
-    from layerpilot.mission.config import to_settings
+    from layerpilot.missionfile import to_settings
     from layerpilot.mission.pilot import PATTERNS
     from layerpilot.progress import Progress
 

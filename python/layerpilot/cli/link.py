@@ -60,7 +60,7 @@ LINK_FLAGS = {"mavlink": "link.link.url", "sysid": "link.link.source_system", "c
 
 
 def _node(args, mission, vehicle, session) -> Running:
-    from layerpilot.mission.build import geofence_for
+    from layerpilot.missionfile import geofence_for
     from layerpilot.nodes.link import LinkNode
 
     node = LinkNode(session, vehicle, link_settings(args, mission, vehicle), geofence_for(mission),
@@ -102,7 +102,7 @@ def _act(args: argparse.Namespace) -> int:
     import logging
 
     from layerpilot.cli.nodes import mission_from_args
-    from layerpilot.mission.build import geofence_for
+    from layerpilot.missionfile import geofence_for
 
     plan = _plan_to_fly(args) if args.link_command == "fly-plan" else None  # a bad file: before connecting
     mission = mission_from_args(args, LINK_FLAGS)

@@ -110,7 +110,7 @@ def mission_from_args(args: argparse.Namespace, flags: dict[str, str | tuple[str
     A bad flag value is an error naming
     the flag (``--rate must be in [0.01, 100.0], got 0.0``).
     """
-    from layerpilot.mission.config import Override, load_mission
+    from layerpilot.missionfile import Override, load_mission
 
     overrides = [Override("--" + dest.replace("_", "-"), key, getattr(args, dest))
                  for dest, keys in flags.items() if getattr(args, dest, None) is not None
@@ -257,7 +257,7 @@ def _camera(args, mission, vehicle, session) -> Running:
 def _router(args: argparse.Namespace) -> int:
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
-    from layerpilot.mission.config import load_mission
+    from layerpilot.missionfile import load_mission
     from layerpilot.nodes.runner import bus_config, stop_event, wait_for_stop
 
     stop = stop_event()

@@ -49,7 +49,7 @@ def _bus_options(p: argparse.ArgumentParser) -> None:
 
 def _session(args: argparse.Namespace):
     from layerpilot.bus.security import open_node_session
-    from layerpilot.mission.config import load_mission
+    from layerpilot.missionfile import load_mission
     from layerpilot.nodes.runner import bus_config
 
     mission = load_mission(args.config)
@@ -102,7 +102,7 @@ def _view(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     from layerpilot.bus.recording import Recorder
-    from layerpilot.mission.config import resolve
+    from layerpilot.missionfile import resolve
 
     mission, session = _session(args)
     try:
@@ -145,6 +145,6 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _load(config: str):
-    from layerpilot.mission.config import load_mission
+    from layerpilot.missionfile import load_mission
 
     return load_mission(config)

@@ -25,7 +25,7 @@ import numpy as np
 
 from layerpilot.depth.picking import altitude_scene_depth
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 
 
 # --- survey leg over the forest ---------------------------------------------------------------

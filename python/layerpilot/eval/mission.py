@@ -52,8 +52,8 @@ from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, WaypointRefused
 from layerpilot.map import VoxelMap
 from layerpilot.mission import resume as survey
-from layerpilot.mission.build import geofence_for
-from layerpilot.mission.config import Mission, to_settings
+from layerpilot.missionfile import geofence_for
+from layerpilot.missionfile import Mission, to_settings
 from layerpilot.mission.pilot import Command
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.progress import Progress
@@ -167,7 +167,7 @@ class LockstepMission:
         self.overlap = mission.evaluation.overlap if overlap is None else overlap
         # the run directory gets the map, not the mission's snapshot path
         mission = replace(mission, map_server=replace(mission.map_server, snapshot=""))
-        self.pipeline = MissionPipeline(mission, vehicles=[self.vehicle])
+        self.pipeline = MissionPipeline(mission.core, vehicles=[self.vehicle])
         self.pilot = self.pipeline.pilots[self.vehicle]
         self.truth, self.gt = GroundTruthDepth(), VoxelMap(mission.map_server.resolution)  # what the map is scored on
         home = mission.decide.home

@@ -25,7 +25,7 @@ from layerpilot.bus import messages as msg
 from layerpilot.bus.recording import RecordingReader
 from layerpilot.bus.reject import BadMessage
 from layerpilot.config import ConfigError, from_dict
-from layerpilot.mission.config import Mission, load_mission
+from layerpilot.missionfile import Mission, load_mission
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.progress import Progress
 
@@ -70,7 +70,7 @@ def replay(recording: str | Path, out: str | Path, *, mission: Mission | None = 
     mission = dataclasses.replace(mission, map_server=dataclasses.replace(mission.map_server, snapshot=""))
     if behavior is not None:
         mission = dataclasses.replace(mission, decide=dataclasses.replace(mission.decide, behavior=behavior))
-    pipeline = MissionPipeline(mission, {"map", "decide"} if behavior is not None else {"map"}, [vehicle])
+    pipeline = MissionPipeline(mission.core, {"map", "decide"} if behavior is not None else {"map"}, [vehicle])
     period = 1.0 / mission.map_server.layers_rate
     next_tick = 0.0
     rejected, clouds, own_clouds = 0, 0, 0

@@ -5,7 +5,7 @@ mission clock; a camera frame taken between two poses gets the pose between them
 linear, rotation slerp). A frame in a telemetry gap longer than ``camera.max_gap``, before the
 first pose or after the newest one cannot be placed: it is dropped, and the reason counted.
 The camera sits on the body at ``camera.offset`` (m, FLU), looking ``yaw_deg`` left of forward
-and ``pitch_deg`` below the horizon, as the simulator's camera does (sim.camera.camera_pose);
+and ``pitch_deg`` below the horizon, as the simulator's camera does (layerpilot.camera.camera_pose);
 on a gimbal (``camera.gimbal``) it keeps only the body's heading, as the simulator renders.
 """
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from layerpilot.config import ConfigError, check_range
 from layerpilot.geometry import Pose
-from layerpilot.sim.camera import camera_pose
+from layerpilot.camera import camera_pose
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from layerpilot.decide.behavior import Behavior
 from layerpilot.layers.view_gain import CameraView
 from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.patterns import footprint_width, survey_speed
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.camera import CameraConfig
 
 
 def vertical_fov_deg(camera: CameraConfig) -> float:

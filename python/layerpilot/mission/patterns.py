@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from layerpilot.sim.camera import CameraConfig
+from layerpilot.camera import CameraConfig
 
 
 def _check_area(centre, radius: float, altitude: float) -> np.ndarray:

@@ -19,7 +19,6 @@ bus codec in the drivers, exactly as they travel.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
@@ -31,7 +30,7 @@ from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import InsertResult
 from layerpilot.mission.build import build_depth_service, build_pilot, map_volume
-from layerpilot.mission.config import Mission
+from layerpilot.mission.core import MissionCore
 from layerpilot.mission.depth_service import DepthService
 from layerpilot.mission.map_service import MapService
 from layerpilot.mission.pilot import Command, Pilot
@@ -52,7 +51,7 @@ class LayerView:
 class MissionPipeline:
     """The map service, the depth services and the pilots of a mission's vehicles, behind one interface."""
 
-    def __init__(self, mission: Mission, roles: Collection[str] = ROLES, vehicles: Sequence[str] | None = None, *,
+    def __init__(self, mission: MissionCore, roles: Collection[str] = ROLES, vehicles: Sequence[str] | None = None, *,
                  map_service: MapService | None = None) -> None:
         """``roles``: which steps this process runs; ``vehicles``: whose (default: the mission's);
         ``map_service``: a started one (the map server's, reloaded from its snapshot), else a fresh map."""
@@ -138,9 +137,3 @@ class MissionPipeline:
     def position(self, vehicle: str) -> tuple[float, float, float]:
         """The vehicle's newest position (map frame; its home before the first pose)."""
         return self._where[vehicle]
-
-    def with_behavior(self, behavior: str) -> "MissionPipeline":
-        """The same mission's pipeline with another decide behavior (replay: what would it have chosen?)."""
-        decide = dataclasses.replace(self.mission.decide, behavior=behavior)
-        return MissionPipeline(dataclasses.replace(self.mission, decide=decide), self.roles, self.vehicles,
-                               map_service=self.map)

@@ -36,9 +36,9 @@ from layerpilot.bus.session import publish
 from layerpilot.decide.maker import TickTerms
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
-from layerpilot.mission.build import geofence_for
+from layerpilot.missionfile import geofence_for
 from layerpilot.mission.energy import RETURN_PHASE
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.pilot import Command
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.nodes.supervise import Supervisor
@@ -94,7 +94,7 @@ class DecideNode:
         without ``resume``."""
         self.session, self.keys, self.mission = session, keys.Keys(vehicle), mission
         self._fence = geofence_for(mission)
-        self.pipeline = MissionPipeline(mission, {"decide"}, [vehicle])
+        self.pipeline = MissionPipeline(mission.core, {"decide"}, [vehicle])
         self.pilot = self.pipeline.pilots[vehicle]
         self.mission_id = mission_id
         self.state_path = survey.state_file(mission.decide.state, vehicle) if mission.decide.state else None

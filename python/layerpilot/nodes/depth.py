@@ -18,7 +18,7 @@ from layerpilot.bus.messages import CloudMessage, FrameMessage, State, decode_fr
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.mission.pipeline import MissionPipeline
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.nodes.queue import DropOldest
 from layerpilot.nodes.supervise import Supervisor
 
@@ -35,7 +35,7 @@ class DepthNode:
         self.supervisor = supervisor or Supervisor(_log)
         self.rejects = Rejects(_log)
         self.queue: DropOldest[FrameMessage] = DropOldest(self.cfg.queue_size)
-        self.pipeline = MissionPipeline(mission, {"depth"}, [vehicle])
+        self.pipeline = MissionPipeline(mission.core, {"depth"}, [vehicle])
         self.service = self.pipeline.depth[vehicle]
         self.poses: deque[State] = deque(maxlen=POSE_BACKLOG)  # appended by Zenoh's thread, drained by the worker
         self._subs: list = []

@@ -38,7 +38,7 @@ from layerpilot.geometry import Pose
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
 from layerpilot.mission.clock import MissionClock
-from layerpilot.mission.config import LinkSettings
+from layerpilot.missionfile import LinkSettings
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.link.modes import GUIDED_MODE
 from layerpilot.nodes.runner import WAKE_PERIOD, wait_for_stop

@@ -31,7 +31,7 @@ from layerpilot.bus.proto_gen import messages_pb2 as pb
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.mission.build import map_volume
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.map_service import COLUMN_LAYERS, CloudRefused, MapService
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.nodes.queue import DropOldest
@@ -52,7 +52,7 @@ class MapServer:
         self.rejects = Rejects(_log)
         self.queue: DropOldest[CloudMessage] = DropOldest(self.cfg.queue_size)
         # clouds reach the mission's area only
-        self.pipeline = MissionPipeline(mission, {"map"}, map_service=MapService.start(self.cfg, map_volume(mission)))
+        self.pipeline = MissionPipeline(mission.core, {"map"}, map_service=MapService.start(self.cfg, map_volume(mission.core)))
         self.service = self.pipeline.map
         self.layer_sets_published = 0
         self.queries_answered = 0

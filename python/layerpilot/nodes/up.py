@@ -20,7 +20,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from layerpilot.mission.config import load_mission, resolve
+from layerpilot.missionfile import load_mission, resolve
 
 RESTART_DELAY = 1.0  # s before the first restart; doubled after each failure in a row
 MAX_RESTART_DELAY = 30.0  # s

@@ -1,4 +1,5 @@
-"""Simulator: procedural forest world, rendered camera with ground-truth depth, scripted baselines.
+"""Simulator: procedural forest world, the camera rendered with ground-truth depth (the camera model itself
+is ``layerpilot.camera``), the simulated multicopter.
 
 The vehicle dynamics and its MAVLink endpoint live in ``vehicle`` and
 ``mavlink_vehicle``; ``simulator`` ties world, camera and vehicle together; ``sensors``
@@ -6,7 +7,6 @@ states how far what the drone reports is from the truth.
 Rendering needs moderngl and is imported lazily. See docs/sim.md.
 """
 
-from layerpilot.sim.camera import CameraConfig, camera_pose, pixel_rays
 from layerpilot.sim.world import World, WorldConfig
 
 
@@ -21,5 +21,4 @@ def __getattr__(name: str):
     raise AttributeError(name)
 
 
-__all__ = ["CameraConfig", "Renderer", "SimConfig", "Simulator", "World", "WorldConfig",
-           "camera_pose", "pixel_rays"]
+__all__ = ["Renderer", "SimConfig", "Simulator", "World", "WorldConfig"]

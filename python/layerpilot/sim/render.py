@@ -2,7 +2,8 @@
 
 API (for the depth estimator and the simulator)::
 
-    from layerpilot.sim import World, WorldConfig, CameraConfig, Renderer, camera_pose
+    from layerpilot.camera import CameraConfig, camera_pose
+    from layerpilot.sim import World, WorldConfig, Renderer
     world = World(WorldConfig(seed=1))
     with Renderer(world, CameraConfig()) as r:          # 640x480, 90 deg HFOV, pitch 60 deg down
         pose = camera_pose((0, 0, 30), yaw=0.0, pitch_deg=r.camera.pitch_deg)
@@ -31,7 +32,7 @@ import os
 import numpy as np
 
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, Pose
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 from layerpilot.sim.world import World
 
 SKY_RGB = (160, 196, 235)

@@ -32,7 +32,7 @@ import numpy as np
 from layerpilot.config import check_range
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.sim.battery import BatteryConfig
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 from layerpilot.sim.estimate import VehiclePose
 from layerpilot.sim.sensors import SensorProfile, sensor_profile
 from layerpilot.sim.world import World, WorldConfig

@@ -29,7 +29,7 @@ from layerpilot.decide import zone_mask
 from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import Voxels
-from layerpilot.mission.config import Mission
+from layerpilot.missionfile import Mission
 from layerpilot.mission.pilot import load_pilot_behavior
 from layerpilot.nodes.decide import decode_aggregates
 from layerpilot.viz.scene import MissionScene, area_outline

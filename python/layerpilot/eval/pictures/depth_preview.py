@@ -20,7 +20,8 @@ def write_preview(out: Path, width: int = 640, height: int = 480, index: int = 0
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from layerpilot.sim import CameraConfig, Renderer, World, WorldConfig
+    from layerpilot.camera import CameraConfig
+    from layerpilot.sim import Renderer, World, WorldConfig
 
     if not 0 <= index < len(BENCH_PAIRS):
         raise ValueError(f"index: pair {index} does not exist (0..{len(BENCH_PAIRS) - 1})")

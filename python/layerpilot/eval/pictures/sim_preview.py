@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from layerpilot.grid import GridGeometry
-from layerpilot.sim.camera import CameraConfig, camera_pose
+from layerpilot.camera import CameraConfig, camera_pose
 from layerpilot.sim.world import World
 
 

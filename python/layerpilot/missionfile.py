@@ -1,5 +1,8 @@
 """One typed mission: a TOML file parsed once into sections that every command reads.
 
+The edge of the system: besides the core's sections (``Mission.core``: map server, depth, decide, the
+drone's camera) it says how the bus, the link and the simulator are set up.
+
 ``layerpilot up``, every node, ``demo`` and ``study`` take a mission file (a path or a name
 in config/missions/); command-line flags override fields of it. Unknown keys and
 out-of-range values are errors that name the key (``map_server.resolution``), or, when a
@@ -18,10 +21,12 @@ from layerpilot.bus.keys import check_vehicle
 from layerpilot.bus.session import BusConfig
 from layerpilot.config import ConfigError, RangeError, check_range, from_dict, load_toml, shipped_config
 from layerpilot.link.config import LinkConfig
+from layerpilot.link.geofence import Geofence
 from layerpilot.mission.camera_track import CameraSettings
+from layerpilot.mission.core import MissionCore
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
-from layerpilot.mission.pilot import PilotConfig
+from layerpilot.mission.pilot import PilotConfig, load_pilot_behavior
 from layerpilot.sim.simulator import SimConfig
 
 MISSION_DIR = shipped_config("missions")
@@ -96,8 +101,30 @@ class Mission:
         for v in self.vehicles:
             check_vehicle(v)
 
+    @property
+    def core(self) -> MissionCore:
+        """What the mission core needs of this mission (the pipeline's settings)."""
+        return MissionCore(tuple(self.vehicles), self.map_server, self.depth, self.decide, self.sim.camera,
+                           self.sim.frame_rate_hz, self.camera.gimbal, geofence_for(self))
+
     def mavlink_url(self, vehicle: str) -> str:
         return f"tcp:127.0.0.1:{self.mavlink_port + 10 * self.vehicles.index(vehicle)}"
+
+
+def geofence_for(mission: Mission) -> Geofence:
+    """The mission's geofence, which the link enforces whoever sends a waypoint (the live link node,
+    `layerpilot link` actions and the lock-step evaluator all take it from here).
+
+    Area: the decide behavior's area of interest (a pattern's: the balanced preset's), a circle
+    around ``area.center`` (else ``decide.home``) or its polygon, widened by
+    ``link.geofence_margin``; heights above home: ``link.link.alt_min_m`` .. ``alt_max_m``.
+    """
+    area = load_pilot_behavior(mission.decide.behavior).area
+    limits = dict(margin=mission.link.geofence_margin, alt_min=mission.link.link.alt_min_m,
+                  alt_max=mission.link.link.alt_max_m)
+    if area.shape == "polygon":
+        return Geofence.polygon_of(area.polygon, **limits)
+    return Geofence.circle(area.center if area.center is not None else mission.decide.home, area.radius, **limits)
 
 
 @dataclass(frozen=True)
