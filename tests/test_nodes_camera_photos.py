@@ -124,3 +124,19 @@ def test_photos_through_up_map_as_accurately_as_map_images(tmp_path) -> None:
     offline_score = score_elevation(surface, offline.elevation, offline.geometry)
     assert live_score.columns > 0.8 * offline_score.columns
     assert abs(live_score.median - offline_score.median) <= 0.1
+
+
+def test_a_photo_mission_runs_camera_and_depth_only_and_only_its_camera_may_publish_poses(tmp_path) -> None:
+    from layerpilot.bus.security import grants, node_user
+    from layerpilot.missionfile import load_mission
+    from layerpilot.nodes.up import frames_of, node_commands
+
+    path = tmp_path / "photos.toml"
+    path.write_text(f'[camera]\nsource = "{BRIGHTON}"\ngimbal = false\n')
+    mission = load_mission(path)
+    assert frames_of(mission.camera.source) == "photos" and frames_of("flight.avi") == "camera"
+    names = [n.name for n in node_commands(path, mission.vehicles, None, frames="photos")]
+    assert names == ["map-server", "camera/uav1", "depth/uav1"]  # nothing flies: no link, no decide
+    k, camera = keys.Keys("uav1"), node_user("camera", "uav1")
+    assert k.pose in grants(["uav1"], photos=True)[camera].publish
+    assert k.pose not in grants(["uav1"])[camera].publish  # a real camera beside a link may not
