@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 import pytest
@@ -91,21 +92,20 @@ def _weaving_flight(t: np.ndarray, start=(-60.0, 40.0), speed: float = 5.0, ampl
     return xy, heading
 
 
-def test_time_offset_estimate_converges_to_the_simulated_offset(world):
-    """Frames stamped 120 ms behind the telemetry, their reported poses read at the wrong time: the
-    service learns the offset from how the camera turned, within 20 ms."""
-    offset, rate, frames = 0.12, 20.0, 24
+def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0):
+    """Events of the weaving flight with a camera clock ``offset`` seconds behind the telemetry:
+    ("pose", stamp, body pose) at ``rate`` Hz, running a second ahead of ("frame", CameraFrame) at 1 Hz,
+    each frame stamped on the camera's clock and carrying the telemetry's pose at that stamp."""
     t = np.arange(0.0, frames + 2.0, 1.0 / rate)
     xy, heading = _weaving_flight(t)
     altitude = float(world.terrain_height(*xy[0])) + 45.0
     body = [Pose.from_euler(0.0, 0.0, float(h), (x, y, altitude)) for (x, y), h in zip(xy, heading)]
-    service = DepthService(DepthServiceConfig())
     sent = 0
     with Renderer(world, CameraConfig(width=SIZE[0], height=SIZE[1], pitch_deg=60.0)) as r:
         for k in range(1, frames):
             exposure = float(k)  # on the telemetry's clock
-            while sent < len(t) and t[sent] <= exposure + 1.0:  # the telemetry runs ahead of the frames
-                service.push_pose(float(t[sent]), body[sent])
+            while sent < len(t) and t[sent] <= exposure + 1.0:
+                yield "pose", float(t[sent]), body[sent]
                 sent += 1
             i = int(round(exposure * rate))
             truth = r.render(camera_pose((*xy[i], altitude), float(heading[i]) + math.pi / 2, 60.0), exposure)
@@ -115,14 +115,61 @@ def test_time_offset_estimate_converges_to_the_simulated_offset(world):
             s = j - lo
             pos = (1 - s) * np.array([*xy[lo], altitude]) + s * np.array([*xy[lo + 1], altitude])
             yaw = (1 - s) * heading[lo] + s * heading[lo + 1]
-            service.push(dataclasses.replace(truth, pose=camera_pose(pos, float(yaw) + math.pi / 2, 60.0),
-                                             stamp=stamp))
+            yield "frame", dataclasses.replace(truth, pose=camera_pose(pos, float(yaw) + math.pi / 2, 60.0), stamp=stamp)
+
+
+def test_time_offset_estimate_converges_to_the_simulated_offset(world):
+    """Frames stamped 120 ms behind the telemetry, their reported poses read at the wrong time: the
+    service learns the offset from how the camera turned, within 20 ms."""
+    offset = 0.12
+    service = DepthService(DepthServiceConfig())
+    for kind, *event in _offset_flight(world, offset):
+        if kind == "pose":
+            service.push_pose(*event)
+        else:
+            service.push(event[0])
     stats = service.stats()
     assert stats["refined"] >= 15, stats
     assert stats["time_offset_pairs"] >= 5, stats
     assert stats["time_offset_s"] == pytest.approx(offset, abs=0.02), stats
     trajectory = service.trajectory()
     assert len(trajectory) >= 15 and all(s2 > s1 for (s1, _), (s2, _) in zip(trajectory, trajectory[1:]))
+
+
+def test_the_depth_node_hears_the_pose_stream_and_reports_the_refinement(world):
+    """Over the bus (loopback): the node's status carries pairs refined, rejections and the clock offset."""
+    from layerpilot.bus.keys import Keys
+    from layerpilot.bus.messages import FrameMessage, State, encode_frame, encode_state
+    from layerpilot.bus.session import BusConfig, free_endpoint, open_session
+    from layerpilot.missionfile import Mission
+    from layerpilot.nodes.depth import DepthNode
+
+    ep = free_endpoint()
+    node_session, client = open_session(BusConfig(endpoint=ep)), open_session(BusConfig(endpoint=ep))
+    node = DepthNode(node_session, "uav1", Mission())
+    node.start()
+    keys = Keys("uav1")
+    try:
+        time.sleep(0.5)
+        seq = 0
+        for kind, *event in _offset_flight(world, 0.12):
+            if kind == "pose":
+                client.put(keys.pose, encode_state(State(event[0], "uav1", event[1])))
+                continue
+            seq += 1
+            time.sleep(0.05)  # the poses before the frame arrive first
+            client.put(keys.camera, encode_frame(FrameMessage("uav1", seq, event[0])))
+            end = time.monotonic() + 30
+            while node.status().get("frames", 0) < seq and time.monotonic() < end:
+                time.sleep(0.02)
+        status = node.status()
+    finally:
+        node.stop()
+        client.close()
+        node_session.close()
+    assert status["frames"] == seq and status["refined"] >= 15, status
+    assert status["time_offset_s"] == pytest.approx(0.12, abs=0.02), status
+    assert node.rejects.total == 0
 
 
 def test_without_refinement_the_reported_poses_are_used_and_counted_as_such(pair):
