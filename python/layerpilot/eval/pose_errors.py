@@ -53,7 +53,7 @@ def pose_errors(truth: Sequence[StampedPose], estimate: Sequence[StampedPose], o
     order = np.argsort(true_t, kind="stable")
     true_t = true_t[order]
     est_t = np.array([t for t, _ in estimate], np.float64)
-    right = np.clip(np.searchsorted(true_t, est_t), 1, len(true_t) - 1) if len(true_t) > 1 else np.zeros(len(est_t), int)
+    right = np.minimum(np.searchsorted(true_t, est_t), len(true_t) - 1)
     left = np.maximum(right - 1, 0)
     nearest = np.where(np.abs(true_t[left] - est_t) <= np.abs(true_t[right] - est_t), left, right)
     gap = np.abs(true_t[nearest] - est_t)
