@@ -293,7 +293,7 @@ class LockstepMission:
         at the true pose, with the true depth) on the other."""
         self.frames += 1
         self.path.append((float(position[0]), float(position[1])))
-        self.camera_poses["truth"].append((reference.stamp, reference.pose))
+        self.camera_poses["truth"].append((frame.stamp, reference.pose))  # this exposure's truth, by the frame's stamp
         self.camera_poses["raw"].append((frame.stamp, frame.pose))
         if self.view is not None:
             stages.settle()  # the view reads the map
