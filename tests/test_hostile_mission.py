@@ -41,7 +41,7 @@ from test_depth_downscale import upscaled
 K = Keys("uav1")
 BLOCK = zenoh.CongestionControl.BLOCK
 # MB a node's peak memory (VmHWM) may grow above its resident memory before the attack: docs/bus.md, "Budgets"
-BUDGET_MB = {"map-server": 450, "depth/uav1": 600, "decide/uav1": 60, "sim/uav1": 60, "link/uav1": 60, "up": 400}
+BUDGET_MB = {"map-server": 500, "depth/uav1": 600, "decide/uav1": 60, "sim/uav1": 60, "link/uav1": 60, "up": 200}
 RESTART_GROWTH_MB = 8  # per restart of the map server, in `up` (the hub) and decide
 rng = np.random.default_rng(5)
 

@@ -99,3 +99,21 @@ def test_a_full_map_refuses_clouds_and_keeps_serving(monkeypatch):
 def test_bad_shapes_are_named():
     with pytest.raises(ValueError, match="points, origin: expected shapes"):
         service().insert(np.zeros((4, 2), np.float32), ORIGIN, None, 1.0)
+
+
+def test_the_costliest_legal_cloud_stays_within_the_map_servers_budget():
+    """1 M points spread over the 100 m ball around the sensor: nearly every voxel one cloud may reach at
+    1 m (4.2 M). docs/bus.md budgets the map server for one insert's scratch of at most 240 MB."""
+    s = service()
+    d = rng.normal(size=(1 << 20, 3))
+    radii = 100.0 * rng.uniform(0, 1, (1 << 20, 1)) ** (1 / 3)
+    points = (ORIGIN + radii * d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    colors = rng.integers(0, 255, (1 << 20, 3), dtype=np.uint8)
+    t = time.perf_counter()
+    s.insert(points, ORIGIN, colors, 1.0)
+    took = time.perf_counter() - t
+    stats = s.map.stats()
+    print(f"1 M-point ball: {took:.2f} s, scratch {stats['insert_scratch_bytes'] / 1e6:.0f} MB, "
+          f"map {stats['total_bytes'] / 1e6:.0f} MB")
+    assert stats["insert_scratch_bytes"] < 240e6 and stats["total_bytes"] < 60e6, stats
+    assert took < 15.0, took  # 2.4-2.9 s at load 4-12; the loop's stall limit is 30 s

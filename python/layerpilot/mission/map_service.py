@@ -32,7 +32,7 @@ COLUMN_LAYERS = ("observed", "elevation", "color", "last_seen", "min_distance")
 MAX_WINDOW = 2048  # cells per side of a layer window
 MAX_BOX = 512  # voxels per side of a voxel box
 MAP_SIZE_EVERY = 2.0  # s between looks at the map's size (a look walks the tree: 80 ms at 3.6 M leaves)
-MAX_RAY_STEPS = 1 << 27  # voxel steps of one cloud's rays (sum of ray lengths / resolution): about 2 s of insert
+MAX_RAY_STEPS = 1 << 27  # voxel steps of one cloud's rays (sum of ray lengths / resolution): a few s of insert
 
 
 @dataclass(frozen=True)
