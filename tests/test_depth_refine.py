@@ -213,3 +213,16 @@ def test_the_window_takes_a_heading_bias_out_with_the_gnss_track(world):
     refined = np.median([heading_error_deg(p, s) for s, p in trajectory])
     assert raw == pytest.approx(3.0, abs=0.01)
     assert refined < 1.0, refined  # 0.59 measured
+
+
+def test_a_window_adjustment_that_diverges_leaves_the_estimates_alone(pair):
+    from layerpilot.depth.refine import Relative
+    from layerpilot.depth.window import Edge, SlidingWindow
+
+    ref, partner = pair
+    window = SlidingWindow()
+    a, b = window.keyframe(partner.stamp, partner.pose), window.keyframe(ref.stamp, ref.pose)
+    bad = Relative(np.eye(3), np.array([np.nan, 0.0, 0.0]), np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32),
+                   np.zeros(0, int), 0)
+    assert not window.add(Edge(ref.stamp, partner.stamp, bad, math.nan))
+    assert window.edges == [] and a.pose is partner.pose and b.pose is ref.pose

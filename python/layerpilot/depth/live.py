@@ -26,8 +26,8 @@ from layerpilot.depth.refine import PoseRefiner, Relative, disagreement, place, 
 from layerpilot.depth.window import Edge, Keyframe, SlidingWindow, WindowConfig
 from layerpilot.geometry import CameraFrame, Pose
 
-REJECTIONS = ("too_few_matches", "no_essential_matrix", "too_few_inliers", "rotation_disagrees",
-              "direction_disagrees", "scale_disagrees")
+REJECTIONS = ("too_few_matches", "no_essential_matrix", "too_few_inliers", "rotation_disagrees",  # why a pair gave no cloud
+              "direction_disagrees", "scale_disagrees", "adjustment_failed")
 
 
 @dataclass(frozen=True)
@@ -138,7 +138,9 @@ class LiveRefiner:
         other = self.window.keyframe(partner.stamp, prior_o)
         new = self.window.keyframe(frame.stamp, prior_f)
         new.pose = _ref_from_other(other.pose, rel, length if math.isfinite(length) else gnss)
-        self.window.add(Edge(frame.stamp, partner.stamp, rel, length))
+        if not self.window.add(Edge(frame.stamp, partner.stamp, rel, length)):
+            self.rejected["adjustment_failed"] += 1
+            return None
         baseline = float(np.linalg.norm(new.pose.position - other.pose.position))
         ok = np.isfinite(points).all(1) & (points[:, 2] > 0)
         new.points_px, new.points = rel.ref_px[ok], points[ok] * baseline
@@ -166,7 +168,7 @@ class LiveRefiner:
     def stats(self) -> dict[str, float]:
         """Pairs refined, rejected per reason, and the clock offset once known (with the pairs it rests on)."""
         dt = self.time_offset
-        return {"refined": self.refined, **{f"rejected_{k}": v for k, v in sorted(self.rejected.items())},
+        return {"refined": self.refined, **{f"rejected_{k}": self.rejected[k] for k in REJECTIONS},
                 **({"time_offset_s": round(dt, 4)} if dt is not None else {}), "time_offset_pairs": self.offset.pairs}
 
 

@@ -14,12 +14,13 @@ the window spreads that error over its whole length instead.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import MatrixRankWarning, spsolve
 
 from layerpilot.config import check_range
 from layerpilot.depth.refine import Relative
@@ -89,14 +90,18 @@ class SlidingWindow:
                 self.edges = [e for e in self.edges if e.ref != gone and e.other != gone]
         return self.frames[stamp]
 
-    def add(self, edge: Edge) -> None:
-        """Add a pair between two keyframes already in the window and adjust."""
+    def add(self, edge: Edge) -> bool:
+        """Add a pair between two keyframes already in the window and adjust; False (and the edge
+        left out, the estimates unchanged) when the adjustment does not give finite poses."""
         if edge.ref not in self.frames or edge.other not in self.frames:
             raise ValueError("edge: both keyframes must be in the window")
         self.edges.append(edge)
-        self.solve()
+        if not self.solve():
+            self.edges.pop()
+            return False
+        return True
 
-    def solve(self, iterations: int = 4) -> None:
+    def solve(self, iterations: int = 4) -> bool:
         """Re-estimate every keyframe in the window from the edges and the priors: Gauss-Newton on the
         rotation corrections (map axes, ``R <- exp(w) R``) and centres together, robustly reweighted."""
         stamps = list(self.order)
@@ -107,13 +112,18 @@ class SlidingWindow:
         C = np.array([self.frames[s].pose.position for s in stamps])
         prior_R = np.array([self.frames[s].prior.rotation for s in stamps])
         prior_C = np.array([self.frames[s].prior.position for s in stamps])
-        for _ in range(iterations):
-            step = self._step(R, C, prior_R, prior_C, ref, other)
-            R, C = _exp(step[:, :3]) @ R, C + step[:, 3:]
-            if np.abs(step[:, :3]).max() < 1e-7 and np.abs(step[:, 3:]).max() < 1e-4:
-                break
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", MatrixRankWarning)
+            for _ in range(iterations):
+                step = self._step(R, C, prior_R, prior_C, ref, other)
+                if not np.isfinite(step).all():
+                    return False
+                R, C = _exp(step[:, :3]) @ R, C + step[:, 3:]
+                if np.abs(step[:, :3]).max() < 1e-7 and np.abs(step[:, 3:]).max() < 1e-4:
+                    break
         for s, Rk, Ck in zip(stamps, R, C):
             self.frames[s].pose = Pose.from_rotation(_orthonormal(Rk), Ck)
+        return True
 
     def _step(self, R: np.ndarray, C: np.ndarray, prior_R: np.ndarray, prior_C: np.ndarray, ref: np.ndarray,
               other: np.ndarray) -> np.ndarray:
