@@ -89,14 +89,14 @@ def _mission(args: argparse.Namespace):
 
 
 def _table(rows: dict[str, dict[str, float]]) -> str:
-    from layerpilot.eval.pictures.plots import LABELS
     from layerpilot.eval.report import format_value
+    from layerpilot.eval.summary import label
 
     names = [k for k in next(iter(rows.values())) if k != "t"]
-    width = max(len(LABELS.get(n, n)) for n in names)
-    lines = [" " * width + "  " + "  ".join(f"{label:>12}" for label in rows)]
+    width = max(len(label(n)) for n in names)
+    lines = [" " * width + "  " + "  ".join(f"{name:>12}" for name in rows)]
     for n in names:
-        lines.append(f"{LABELS.get(n, n):>{width}}  " + "  ".join(f"{format_value(r[n]):>12}" for r in rows.values()))
+        lines.append(f"{label(n):>{width}}  " + "  ".join(f"{format_value(r[n]):>12}" for r in rows.values()))
     return "\n".join(lines)
 
 
