@@ -140,3 +140,22 @@ def test_a_photo_mission_runs_camera_and_depth_only_and_only_its_camera_may_publ
     k, camera = keys.Keys("uav1"), node_user("camera", "uav1")
     assert k.pose in grants(["uav1"], photos=True)[camera].publish
     assert k.pose not in grants(["uav1"])[camera].publish  # a real camera beside a link may not
+
+
+def test_photos_without_a_capture_time_or_at_the_same_time_are_skipped_with_the_reason(tmp_path) -> None:
+    import shutil
+
+    first, second = BRIGHTON / "images" / "DJI_0018.JPG", BRIGHTON / "images" / "DJI_0019.JPG"
+    shutil.copy(first, tmp_path / "a.jpg")
+    shutil.copy(first, tmp_path / "b.jpg")  # the same capture time as a.jpg
+    data = second.read_bytes()
+    assert data.count(b"2016:06:23 16:32:06") >= 1
+    (tmp_path / "c.jpg").write_bytes(data.replace(b"2016:06:23 16:32:06", b"0000:00:00 00:00:00"))
+    player = open_player(tmp_path, photo_settings(tmp_path).mount)
+    assert [m.path.name for m in player.folder.photos] == ["a.jpg"] and player.stamps.tolist() == [0.0]
+    assert player.folder.skipped == {"b.jpg": "taken at the same time as a.jpg",
+                                     "c.jpg": "no capture time in EXIF (DateTimeOriginal)"}
+    (tmp_path / "a.jpg").unlink()
+    (tmp_path / "b.jpg").unlink()
+    with pytest.raises(ValueError, match="no photo has a capture time"):
+        open_player(tmp_path, photo_settings(tmp_path).mount)
