@@ -72,11 +72,16 @@ def bomb_cloud(points: int) -> bytes:
     return m.SerializeToString()
 
 
-def bomb_frame(width: int, height: int) -> bytes:
+def bomb_frame(width: int, height: int, depth: bool = False) -> bytes:
+    """A frame whose image (and depth image) inflate from a few hundred KB to their full size."""
     m = pb.CameraFrame(stamp=5.0, vehicle="uav1", seq=1)
     m.image.dtype, m.image.compression = "uint8", pb.Array.ZLIB
     m.image.shape[:] = [height, width, 3]
     m.image.data = zlib.compress(bytes(width * height * 3), 9)
+    if depth:  # 12.6 MP: 38 MB of image + 50 MB of depth, the largest frame the limits accept
+        m.depth.dtype, m.depth.compression = "float32", pb.Array.ZLIB
+        m.depth.shape[:] = [height, width]
+        m.depth.data = zlib.compress(np.full((height, width), 30.0, np.float32).tobytes(), 9)
     m.intrinsics.fx = m.intrinsics.fy = 100.0
     m.intrinsics.cx, m.intrinsics.cy, m.intrinsics.width, m.intrinsics.height = width / 2, height / 2, width, height
     m.pose.orientation.w = 1.0
@@ -129,7 +134,8 @@ def hostile_payloads() -> dict[str, list[bytes]]:
     return {
         K.cloud: [bomb_cloud(1 << 20), bomb_cloud(1 << 24), huge_points] * 3
         + [far_cloud(10_000), far_cloud(1000), far_cloud(100, origin=(3000.0, 0.0, 50.0))] * 5,
-        K.camera: [bomb_frame(4096, 3072), bomb_frame(16384, 16384), bomb_frame(100000, 1)] * 2 + big_stereo_pair(),
+        K.camera: [bomb_frame(4096, 3072), bomb_frame(16384, 16384), bomb_frame(100000, 1)] * 2 + big_stereo_pair()
+        + [bomb_frame(4096, 3072, depth=True)] * 6,  # more than the depth node's queue holds
         K.layers: [layer_set(0.0, 1e-320, 16), layer_set(1e300, 1.0, 16), layer_set(0.0, 1.0, 4096), far_layers] * 5
         + [big_layer_set()] * 3,
         K.pose: [msg.encode_state(msg.State(t, "uav1", Pose(np.array(p, float))))
