@@ -27,8 +27,6 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.depth.config import RefineConfig
@@ -202,10 +200,11 @@ def _full(px: np.ndarray, scale: float) -> np.ndarray:
     return px if scale == 1.0 else ((px + 0.5) / scale - 0.5).astype(np.float32)
 
 
-def polish(K: np.ndarray, pa: np.ndarray, pb: np.ndarray, R: np.ndarray, t: np.ndarray, px: float
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """(R, t) minimising the robust Sampson error of the inliers (at most ``POLISH_POINTS``, evenly
-    taken): RANSAC's minimal-sample pose is several times less accurate than what all the matches say."""
+def polish(K: np.ndarray, pa: np.ndarray, pb: np.ndarray, R: np.ndarray, t: np.ndarray, px: float,
+           iterations: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) minimising the robust (Huber at ``px``) Sampson error of the inliers (at most
+    ``POLISH_POINTS``, evenly taken) by reweighted Gauss-Newton: RANSAC's minimal-sample pose is
+    several times less accurate than what all the matches say."""
     if len(pa) > POLISH_POINTS:
         keep = np.linspace(0, len(pa) - 1, POLISH_POINTS).astype(int)
         pa, pb = pa[keep], pb[keep]
@@ -213,22 +212,54 @@ def polish(K: np.ndarray, pa: np.ndarray, pb: np.ndarray, R: np.ndarray, t: np.n
     xa = np.column_stack([pa, np.ones(len(pa))]) @ Ki.T
     xb = np.column_stack([pb, np.ones(len(pb))]) @ Ki.T
     t = t / np.linalg.norm(t)
-    u = np.cross(t, [1.0, 0.0, 0.0] if abs(t[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(t, u)
+    h = 1e-6
+    probes = np.vstack([np.zeros(5), h * np.eye(5)])  # the pose and a step along each of its 5 freedoms
+    for _ in range(iterations):
+        u = np.cross(t, [1.0, 0.0, 0.0] if abs(t[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        basis = np.stack([u, np.cross(t, u)])
+        res = _sampson(xa, xb, *_moved(R, t, basis, probes)) * K[0, 0]  # (6, N)
+        r0, J = res[0], (res[1:] - res[0]) / h  # J: (5, N)
+        w = np.minimum(1.0, px / np.maximum(np.abs(r0), 1e-12))  # Huber's weights
+        step = -np.linalg.solve((J * w) @ J.T + 1e-12 * np.eye(5), (J * w) @ r0)
+        Rs, ts = _moved(R, t, basis, step[None])
+        R, t = Rs[0], ts[0]
+        if np.abs(step).max() < 1e-7:
+            break
+    return R, t
 
-    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        tt = t + p[3] * u + p[4] * v
-        return Rotation.from_rotvec(p[:3]).as_matrix() @ R, tt / np.linalg.norm(tt)
 
-    def sampson(p: np.ndarray) -> np.ndarray:
-        Rr, tt = unpack(p)
-        E = np.array([[0.0, -tt[2], tt[1]], [tt[2], 0.0, -tt[0]], [-tt[1], tt[0], 0.0]]) @ Rr
-        Ex, Etx = xa @ E.T, xb @ E
-        return (xb * Ex).sum(1) / np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2) * K[0, 0]
+def _moved(R: np.ndarray, t: np.ndarray, basis: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) for each row of ``p`` (k, 5): turned by the rotation vector p[:3], the baseline direction
+    tilted by p[3:] along the two ``basis`` vectors."""
+    tt = t + p[:, 3:] @ basis
+    return rotation_matrices(p[:, :3]) @ R, tt / np.linalg.norm(tt, axis=1, keepdims=True)
 
-    sol = least_squares(sampson, np.zeros(5), loss="huber", f_scale=px, method="trf", max_nfev=50)
-    return unpack(sol.x)
+
+def _sampson(xa: np.ndarray, xb: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Sampson distances (k, N) (normalised image units) of the correspondences xa <-> xb (N, 3) for
+    each of k poses (R (k, 3, 3), t (k, 3)): E = [t]x R."""
+    E = skew(t) @ R
+    Ex, Etx = np.einsum("kij,nj->kni", E, xa), np.einsum("kji,nj->kni", E, xb)
+    return (xb[None] * Ex).sum(2) / np.sqrt(Ex[..., 0] ** 2 + Ex[..., 1] ** 2 + Etx[..., 0] ** 2 + Etx[..., 1] ** 2)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices [v]x of vectors (N, 3)."""
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
+
+
+def rotation_matrices(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors (N, 3) (Rodrigues)."""
+    theta = np.linalg.norm(w, axis=1)[:, None, None]
+    K = skew(w)
+    small = theta < 1e-8
+    a = np.where(small, 1.0, np.sin(theta) / np.where(small, 1.0, theta))
+    b = np.where(small, 0.5, (1 - np.cos(theta)) / np.where(small, 1.0, theta ** 2))
+    return np.eye(3)[None] + a * K + b * (K @ K)
 
 
 def triangulate(K: np.ndarray, rel: Relative) -> np.ndarray:
