@@ -98,6 +98,9 @@ def test_every_decoder_rejects_or_returns_valid(decode):
     assert accepted < 1000
 
 
+INSERT_KINDS = {"outside the area", "too costly", "map full", "insert failed"}  # the map server's, after decoding
+
+
 def test_map_server_survives_thousands_of_bad_clouds():
     ep = free_endpoint()
     server_session = open_session(BusConfig(endpoint=ep))
@@ -117,15 +120,17 @@ def test_map_server_survives_thousands_of_bad_clouds():
                 expected_rejects += 1
             pub.put(p)
         client.put(key, GOOD[msg.decode_cloud])
+        # a mutation that decodes may still be refused at insertion (an origin bit-flipped out of the area)
+        decoding = lambda: sum(n for k, n in server.rejects.by_kind().items() if k not in INSERT_KINDS)  # noqa: E731
         end = time.monotonic() + 60
-        while server.rejects.total < expected_rejects and time.monotonic() < end:
+        while decoding() < expected_rejects and time.monotonic() < end:
             time.sleep(0.05)
-        assert server.rejects.total == expected_rejects
+        assert decoding() == expected_rejects
         assert server.queue.received == len(bad) + 1 - expected_rejects
         kinds = server.rejects.by_kind()
         assert {"not protobuf", "bad size"} <= set(kinds), kinds
         reply = list(client.get(Keys("uav1").service("stats"), timeout=10))[0]
-        assert pb.MapStats.FromString(reply.ok.payload.to_bytes()).messages_rejected == expected_rejects
+        assert pb.MapStats.FromString(reply.ok.payload.to_bytes()).messages_rejected >= expected_rejects
     finally:
         server.stop()
         client.close()
