@@ -39,7 +39,7 @@ class RectifiedPair:
     cy: float
     baseline: float  # metres
     to_camera: np.ndarray  # (3, 3) reference camera <- canonical rectified camera
-    source_xy: np.ndarray  # float32 (H, W, 2): canonical pixel -> reference image pixel (full resolution)
+    source_index: np.ndarray  # int32 (H, W): canonical pixel -> flat index of the nearest reference image pixel
     vertical: bool  # stereoRectify chose a vertical pair
     mirrored: bool
 
@@ -94,9 +94,11 @@ def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> Rectifi
         M = np.diag([-1.0, 1.0, 1.0]) @ M
     # canonical point p_c = M @ p_rect and p_rect = R1 @ p_ref
     to_camera = R1.T @ M.T
-    source_xy = (np.dstack([lx, ly]) + 0.5) / scale - 0.5
+    hh, ww = ref.image.shape[:2]  # full resolution
+    px = np.clip(np.rint((lx + 0.5) / scale - 0.5), 0, ww - 1).astype(np.int32)
+    py = np.clip(np.rint((ly + 0.5) / scale - 0.5), 0, hh - 1).astype(np.int32)
     return RectifiedPair(left, right, _inside(lx, ly, w, h), _inside(rx, ry, w, h), f, cx, cy,
-                         float(abs(other_pos)), to_camera, source_xy.astype(np.float32), vertical, mirrored)
+                         float(abs(other_pos)), to_camera, py * np.int32(ww) + px, vertical, mirrored)
 
 
 def _zoomed(P: np.ndarray, s: float, size: tuple[int, int]) -> np.ndarray:

@@ -101,17 +101,16 @@ class StereoMatcher:
         """Points seen from ``ref`` (origin = ref's camera centre, stamp = ref's stamp)."""
         disp = self.disparity(ref, other)
         pair = disp.pair
-        v, u = np.nonzero(np.isfinite(disp.depth))
-        z = disp.depth[v, u]
+        found = np.isfinite(disp.depth)  # boolean masks: one pass each, no index arrays
+        h, w = found.shape
+        z = disp.depth[found]
         canon = np.empty((len(z), 3), np.float32)
-        canon[:, 0] = (u.astype(np.float32) - np.float32(pair.cx)) * z / np.float32(pair.f)
-        canon[:, 1] = (v.astype(np.float32) - np.float32(pair.cy)) * z / np.float32(pair.f)
+        f = np.float32(pair.f)
+        canon[:, 0] = np.broadcast_to((np.arange(w, dtype=np.float32) - np.float32(pair.cx)) / f, (h, w))[found] * z
+        canon[:, 1] = np.broadcast_to(((np.arange(h, dtype=np.float32) - np.float32(pair.cy)) / f)[:, None], (h, w))[found] * z
         canon[:, 2] = z
-        xy = pair.source_xy[v, u]
-        hh, ww = ref.image.shape[:2]
-        px = np.clip(np.rint(xy[:, 0]).astype(np.int32), 0, ww - 1)
-        py = np.clip(np.rint(xy[:, 1]).astype(np.int32), 0, hh - 1)
-        return camera_points_to_cloud(ref, canon, ref.image[py, px], pair.to_camera), disp
+        colors = ref.image.reshape(-1, 3)[pair.source_index[found]]
+        return camera_points_to_cloud(ref, canon, colors, pair.to_camera), disp
 
 
 def _sgbm(c: MatchConfig, disp12_max_diff: int) -> cv2.StereoSGBM:
