@@ -3,14 +3,16 @@
 No pose refinement removes the offset that every GNSS position shares (it needs ground
 control); surveyors state accuracy after removing it and SLAM benchmarks align before they
 score (TUM RGB-D's absolute trajectory error, Tanks and Temples' ICP before its F-score).
-So the headline map metrics are taken after removing the single best translation between
-the estimated map and the true world, and the same metrics without it (``*_absolute``)
-stand beside them, with the translation itself (``offset_x/y/z``: estimated minus true).
+So the headline map metrics are taken after removing a single translation between the
+estimated map and the true world, and the same metrics without it (``*_absolute``) stand
+beside them, with the translation itself (``offset_x/y/z``: estimated minus true).
 
-The translation is searched on the voxel grid (whole voxels, so shifted voxel centres stay
-on the lattice and a shifted column grid is exact), minimising the symmetric chamfer
-distance capped at the match distance d_v, and kept only if it lowers that distance: when
-the maps already agree the offset is exactly 0 and both sets of metrics are identical.
+The translation is a whole number of voxels (shifted voxel centres stay on the lattice and
+a shifted column grid is exact). With the camera poses the map was built from and the true
+ones (the lock-step evaluator has both), it is their common offset (``pose_errors.common_offset``,
+rounded to voxels): exactly what GNSS shares, and exactly 0 with perfect sensors, whatever
+the map's own errors. With maps alone it is searched (``best_offset``: the capped chamfer
+distance, kept only if it lowers it), which also takes up a systematic shift of the map itself.
 """
 
 from __future__ import annotations
@@ -18,12 +20,13 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from layerpilot.eval.metrics import D_V, ABOVE_GT, MAP_METRICS, area_metrics, voxel_metrics
+from layerpilot.eval.pose_errors import StampedPose, common_offset
 from layerpilot.grid import GridGeometry
 
 if TYPE_CHECKING:  # the C++ map is imported only where a map is used
@@ -124,14 +127,23 @@ class MapScorer:
         voxels = voxel_metrics(est, gt, self.d_v).as_dict()
         return {k: v for k, v in {**area.as_dict(), **voxels}.items() if k in MAP_METRICS}
 
-    def __call__(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float) -> dict[str, float]:
-        """Every name in ``SCORE_NAMES`` for the estimated map against the ground-truth one at ``now``."""
+    def __call__(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float,
+                 poses: tuple[Sequence[StampedPose], Sequence[StampedPose]] | None = None) -> dict[str, float]:
+        """Every name in ``SCORE_NAMES`` for the estimated map against the ground-truth one at ``now``.
+
+        ``poses``: (true, placed) camera poses, the placed ones those the map's clouds were placed with;
+        the offset is then theirs (0 while either is empty), else the maps' (``best_offset``)."""
         if not np.isclose(est_map.resolution, gt_map.resolution):
             raise ValueError(f"gt_map: resolution {gt_map.resolution} != est_map's {est_map.resolution}")
         gt = gt_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
         est = est_map.voxels(self.box_min, self.box_max, self.min_occupancy).centers
-        if len(est) and len(gt):  # the first search with something to align is the coarse one
-            self.offset = best_offset(est, gt, est_map.resolution, self.offset if self.searched else None, self.d_v)
+        res = est_map.resolution
+        if poses is not None:
+            truth, placed = poses
+            # whole voxels (+ 0.0: a rounded -0.0 is reported as 0)
+            self.offset = np.round(common_offset(truth, placed) / res) * res + 0.0 if truth and placed else np.zeros(3)
+        elif len(est) and len(gt):  # the first search with something to align is the coarse one
+            self.offset = best_offset(est, gt, res, self.offset if self.searched else None, self.d_v)
             self.searched = True
         absolute = self._metrics(est_map, gt, now, np.zeros(3))
         aligned = absolute if not self.offset.any() else self._metrics(est_map, gt, now, self.offset)

@@ -246,7 +246,7 @@ class LockstepMission:
                 self._frame(t, frame, reference, position, stages)
             if self.sampler.due(t):
                 stages.settle()
-                self.sampler.maybe_sample(t, lambda: self.scorer(self.map, self.gt, t))
+                self.sampler.maybe_sample(t, lambda: self._score(t))
                 if self.view is not None:
                     self.view.metrics(t, self.sampler.series.last())
             last = self.sampler.series.last() if len(self.sampler.series) else {}
@@ -258,7 +258,7 @@ class LockstepMission:
             t = steps * ev.step_s
         stages.settle()
         if self.sampler.series.last()["t"] < t:
-            self.sampler.series.append(t, self.scorer(self.map, self.gt, t))
+            self.sampler.series.append(t, self._score(t))
         progress.close(f"mapped {self.sampler.series.last()['percent_mapped']:.1f}% waypoints {len(self.records)}")
         return t, tuple(float(c) for c in position)
 
@@ -343,6 +343,11 @@ class LockstepMission:
                                  final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings, extra)
         return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records), self.frames, depth.clouds,
                              wall_s, paths, self.inputs)
+
+    def _score(self, t: float) -> dict[str, float]:
+        """The map metrics, aligned by the common offset of the camera poses the clouds were placed with."""
+        placed = self.pipeline.depth[self.vehicle].trajectory()
+        return self.scorer(self.map, self.gt, t, (self.camera_poses["truth"], placed))
 
     def _pose_errors(self, refined: list[tuple[float, Pose]]) -> dict[str, float]:
         """The camera poses as reported (``pose_raw_*``) and as the clouds were placed (``pose_refined_*``)

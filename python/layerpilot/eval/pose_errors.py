@@ -37,18 +37,11 @@ def _rotations(poses: Sequence[Pose]) -> Rotation:
     return Rotation.from_quat(q[:, [1, 2, 3, 0]])
 
 
-def pose_errors(truth: Sequence[StampedPose], estimate: Sequence[StampedPose], offset=(0.0, 0.0, 0.0),
-                max_gap: float = MAX_STAMP_GAP) -> PoseErrors:
-    """Median and p90 of position (metres) and attitude (degrees) errors of ``estimate`` against ``truth``.
-
-    Each estimated pose is paired with the true pose nearest to its stamp (within ``max_gap``);
-    ``offset`` (estimated minus true, metres) is subtracted from every estimated position first.
-    """
+def _paired(truth: Sequence[StampedPose], estimate: Sequence[StampedPose], max_gap: float
+            ) -> tuple[list[Pose], list[Pose]]:
+    """Each estimated pose with the true pose nearest to its stamp (within ``max_gap``), in estimate order."""
     if not truth or not estimate:
         raise ValueError(f"truth, estimate: need at least one pose each, got {len(truth)} and {len(estimate)}")
-    shift = np.asarray(offset, np.float64)
-    if shift.shape != (3,) or not np.all(np.isfinite(shift)):
-        raise ValueError(f"offset: expected 3 finite metres, got {offset!r}")
     true_t = np.array([t for t, _ in truth], np.float64)
     order = np.argsort(true_t, kind="stable")
     true_t = true_t[order]
@@ -60,8 +53,28 @@ def pose_errors(truth: Sequence[StampedPose], estimate: Sequence[StampedPose], o
     if np.any(gap > max_gap):
         i = int(np.argmax(gap))
         raise ValueError(f"estimate: the pose at t = {est_t[i]:.3f} s has no true pose within {max_gap} s")
-    true_poses = [truth[int(order[i])][1] for i in nearest]
-    est_poses = [p for _, p in estimate]
+    return [truth[int(order[i])][1] for i in nearest], [p for _, p in estimate]
+
+
+def common_offset(truth: Sequence[StampedPose], estimate: Sequence[StampedPose],
+                  max_gap: float = MAX_STAMP_GAP) -> np.ndarray:
+    """The translation the estimated positions share (estimated minus true, metres): the per-axis median
+    over the paired poses, what a GNSS offset leaves behind in a trajectory."""
+    true_poses, est_poses = _paired(truth, estimate, max_gap)
+    return np.median(np.array([e.position - t.position for t, e in zip(true_poses, est_poses)]), axis=0)
+
+
+def pose_errors(truth: Sequence[StampedPose], estimate: Sequence[StampedPose], offset=(0.0, 0.0, 0.0),
+                max_gap: float = MAX_STAMP_GAP) -> PoseErrors:
+    """Median and p90 of position (metres) and attitude (degrees) errors of ``estimate`` against ``truth``.
+
+    Each estimated pose is paired with the true pose nearest to its stamp (within ``max_gap``);
+    ``offset`` (estimated minus true, metres) is subtracted from every estimated position first.
+    """
+    shift = np.asarray(offset, np.float64)
+    if shift.shape != (3,) or not np.all(np.isfinite(shift)):
+        raise ValueError(f"offset: expected 3 finite metres, got {offset!r}")
+    true_poses, est_poses = _paired(truth, estimate, max_gap)
     position = np.linalg.norm(np.array([p.position for p in est_poses]) - shift
                               - np.array([p.position for p in true_poses]), axis=1)
     attitude = np.degrees((_rotations(true_poses).inv() * _rotations(est_poses)).magnitude())
