@@ -6,15 +6,15 @@ died, failed or stalled, every query got an answer, no node's peak memory grew p
 docs/bus.md (BUDGET_MB; `up` holds the hub, which routes it all), and the mission still flies: new
 waypoints keep coming. Then the map server is killed three times: it comes back each time, and `up` and
 decide grow by less than RESTART_GROWTH_MB per restart (with Zenoh's shared memory on, eclipse-zenoh
-1.6-1.10 kept about 19 MB in every process per lost peer: docs/bus.md)."""
+1.6-1.10 kept 20 to 40 MB in every process per lost peer: docs/bus.md)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import signal
 import time
-import dataclasses
 import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -40,7 +40,7 @@ from test_depth_downscale import upscaled
 
 K = Keys("uav1")
 BLOCK = zenoh.CongestionControl.BLOCK
-# MB a node's peak memory (VmHWM) may grow above its resident memory before the attack: docs/bus.md, "Budgets"
+# MB a node's peak memory (VmHWM) may grow above its resident memory before the attack: docs/bus.md, "Memory budgets"
 BUDGET_MB = {"map-server": 500, "depth/uav1": 600, "decide/uav1": 60, "sim/uav1": 60, "link/uav1": 60, "up": 200}
 RESTART_GROWTH_MB = 8  # per restart of the map server, in `up` (the hub) and decide
 rng = np.random.default_rng(5)
