@@ -79,9 +79,10 @@ def write_run_report(
     report.table(*final_table(final))
     report.text(f"Sampled every 10 simulated seconds; last sample at t = {final['t']:.1f} s.")
     if "offset_x" in final:
-        report.text("Aligned: after removing the single best translation between the map and the true world "
-                    "(offset x/y/z, estimated minus true, whole voxels; 0 when it does not help); absolute: without "
-                    "it. Pose errors: position after the same translation, attitude as the rotation angle.")
+        report.text("Aligned: after removing one translation between the map and the true world (offset x/y/z, "
+                    "estimated minus true, whole voxels: in a mission the common offset of the camera poses the "
+                    "clouds were placed with, 0 with perfect sensors); absolute: without it. Pose errors: position "
+                    "after the same translation, attitude as the rotation angle.")
     report.heading("Settings")
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
