@@ -46,7 +46,7 @@ def test_a_wide_frame_is_resized_to_the_processing_width_with_the_same_rays():
 
 
 def test_a_12_mp_pair_costs_what_a_640_pixel_pair_costs():
-    """Two 4096x3072 frames 1.8 m apart looking down from 30 m (the pair that took 12.9 s and 1.09 GB)."""
+    """Two 4096x3072 frames 1.8 m apart looking down from 30 m, matched as a 640x480 pair is."""
     world = World(WorldConfig())
     with Renderer(world, CameraConfig(width=640, height=480, pitch_deg=90.0)) as r:
         frames = sideways_flight(r, (40.0, -60.0), heading_deg=0.0, altitude=30.0, pitch_deg=90.0,

@@ -98,14 +98,13 @@ def layer_set(origin: float, resolution: float, size: int) -> bytes:
 
 
 def far_cloud(points: int, origin: tuple[float, float, float] = (0.0, 0.0, 50.0)) -> bytes:
-    """A valid cloud of ``points`` over +-5 km with max_range = 1e7 (10,000 points: 120 KB, which once
-    added 3 GB to the map server and stopped its insert loop)."""
+    """A valid cloud of ``points`` over +-5 km with max_range = 1e7 (10,000 points: 120 KB)."""
     pts = rng.uniform(-5000, 5000, (points, 3)).astype(np.float32)
     return msg.encode_cloud(msg.CloudMessage("uav1", 3, PointCloud(pts, np.array(origin), 6.0), max_range=1e7))
 
 
 def big_stereo_pair() -> list[bytes]:
-    """Two valid 4096x3072 frames 1.8 m apart looking down from 30 m (offline: 12.9 s and 1.09 GB unbounded)."""
+    """Two valid 4096x3072 frames 1.8 m apart looking down from 30 m (matched at 640x480)."""
     with Renderer(World(WorldConfig()), CameraConfig(width=640, height=480, pitch_deg=90.0)) as r:
         frames = sideways_flight(r, (40.0, -60.0), heading_deg=0.0, altitude=30.0, pitch_deg=90.0,
                                  speed=3.6, frames=2, period=0.5)

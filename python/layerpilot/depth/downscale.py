@@ -1,7 +1,8 @@
 """Frames larger than the stereo presets' processing size are downscaled before anything else.
 
 Matching cost grows with the pixels and with the search range, which follows the focal
-length in pixels: a 12.6 MP pair took 12.9 s and 1.09 GB at full size. The presets are
+length in pixels: both grow with the width, so a drone photo's pair costs seconds and
+gigabytes at full size. The presets are
 measured up to ``MAX_WIDTH`` pixels wide; a wider frame is resized to it (image by area
 averaging, depth by nearest neighbour so that no depth is invented between two surfaces)
 and its intrinsics scaled with it, so that rays and poses stay what they were.
