@@ -44,8 +44,8 @@ class SmoothedGaussMarkov:
         var_x = sigma ** 2 * (tau + smoothing) / tau  # var(y) = var(x) tau / (tau + smoothing)
         cov_xy = var_x * tau / (tau + smoothing)
         self._p = np.array([[var_x, cov_xy], [cov_xy, sigma ** 2]])  # solves A P + P A^T + Q = 0
-        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._state = _draw(self._p, rng, size)  # (2, size): rows x, y
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # dt -> (Phi, a square root of cov(w))
+        self._state = _root(self._p) @ rng.normal(0.0, 1.0, (2, size))  # (2, size): rows x, y
 
     @property
     def value(self) -> np.ndarray:
@@ -54,16 +54,16 @@ class SmoothedGaussMarkov:
     def step(self, dt: float) -> np.ndarray:
         if dt not in self._steps:
             phi = expm(self._a * dt)
-            self._steps[dt] = (phi, self._p - phi @ self._p @ phi.T)
-        phi, q = self._steps[dt]
-        self._state = phi @ self._state + _draw(q, self._rng, self._state.shape[1])
+            self._steps[dt] = (phi, _root(self._p - phi @ self._p @ phi.T))
+        phi, root = self._steps[dt]
+        self._state = phi @ self._state + root @ self._rng.normal(0.0, 1.0, self._state.shape)
         return self.value
 
 
-def _draw(cov: np.ndarray, rng: np.random.Generator, size: int) -> np.ndarray:
-    """``size`` samples (as columns) of N(0, cov) for a 2x2 covariance, also when it is (nearly) singular."""
+def _root(cov: np.ndarray) -> np.ndarray:
+    """S with S S^T = cov, also for a (nearly) singular covariance: N(0, cov) samples are S @ N(0, I)."""
     w, v = np.linalg.eigh(cov)
-    return (v * np.sqrt(np.clip(w, 0.0, None))) @ rng.normal(0.0, 1.0, (2, size))
+    return v * np.sqrt(np.clip(w, 0.0, None))
 
 
 @dataclass(frozen=True)
