@@ -33,7 +33,6 @@ from layerpilot.config import check_range
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.sim.battery import BatteryConfig
 from layerpilot.camera import CameraConfig, camera_pose
-from layerpilot.sim.estimate import VehiclePose
 from layerpilot.sim.sensors import SensorProfile, sensor_profile
 from layerpilot.sim.world import World, WorldConfig
 
@@ -68,12 +67,10 @@ class SimConfig:
 @dataclass(frozen=True)
 class Capture:
     """One exposure: ``frame`` is what the drone delivers (image, stamp, reported pose); ``truth`` the same
-    exposure as it was (clean image, true camera pose and depth, stamped with the true time) and
-    ``vehicle`` the true vehicle state then. The truth is for scoring only."""
+    exposure as it was (clean image, true camera pose and depth, stamped with the true time), for scoring only."""
 
     frame: CameraFrame
     truth: CameraFrame
-    vehicle: VehiclePose
 
 
 def _tilt(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -135,7 +132,7 @@ class Simulator:
         now = vehicle.time if now is None else now
         if self.sensors.exact_pose and self.camera is None:
             frame = self.renderer.render_vehicle(vehicle.position, vehicle.yaw, now)
-            return Capture(frame, frame, vehicle)
+            return Capture(frame, frame)
         pitch = self.config.camera.pitch_deg
         nominal = camera_pose(vehicle.position, vehicle.yaw, pitch)
         if not self.sensors.exact_pose:  # the gimbal levels the camera on the EKF's horizon: the truth tilts
@@ -149,7 +146,7 @@ class Simulator:
         reported = self.endpoint.reported_pose_at(vehicle.time + delay)
         frame = CameraFrame(image, camera_pose(reported.position, reported.yaw, pitch), truth.intrinsics,
                             now + delay, truth.depth)
-        return Capture(frame, truth, vehicle)
+        return Capture(frame, truth)
 
     def run(self, on_frame: Callable[[float, object], None] | None = None, speed: float = 1.0,
             duration: float | None = None, stop: threading.Event | None = None) -> None:
