@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 
+from layerpilot.eval.metrics import MAP_METRICS
 from layerpilot.eval.mission import run_mission
 from layerpilot.eval.series import MetricSeries
 from layerpilot.missionfile import Override, load_mission
@@ -29,6 +30,10 @@ def test_short_mission_is_deterministic_and_writes_the_run(tmp_path) -> None:
     assert mapped[0] == 0.0 and 0.0 < mapped[1] < mapped[2] < 100.0
     assert 0.0 < a.final["precision"] <= 1.0 and 0.0 < a.final["recall"] <= 1.0
     assert 0.0 <= a.final["avg_time_since_observed"] <= 20.0
+    # perfect sensors: the map is aligned by its poses' common offset, 0, so both ways score the same
+    # (a map search would take up this 160x120 stereo map's own 1, -1, -2 m; docs/eval.md)
+    assert (a.final["offset_x"], a.final["offset_y"], a.final["offset_z"]) == (0.0, 0.0, 0.0)
+    assert all(a.final[k] == a.final[f"{k}_absolute"] for k in MAP_METRICS if not np.isnan(a.final[k]))
     for name in ["report.html", "report.md", "metrics.json", "map.ot", "map.bt", "plots/flight_path.png"]:
         assert (tmp_path / "a" / name).stat().st_size > 0, name
     first = json.loads((tmp_path / "a" / "decisions.jsonl").read_text().splitlines()[0])
