@@ -119,8 +119,9 @@ def test_each_node_publishes_only_its_own_keys(mission_bus):
     # the pose is the link's: decide's credentials cannot spoof it
     assert delivered(decide, K.pose, lambda: link.put(K.pose, b"pose")) == [b"pose"]
     assert delivered(operator, K.pose, lambda: decide.put(K.pose, b"spoof")) == []
-    # a node is delivered only what it reads: depth reads camera frames, not waypoints
+    # a node is delivered only what it reads: depth reads camera frames and the pose stream, not waypoints
     assert delivered(depth, K.waypoint, lambda: decide.put(K.waypoint, b"wp2")) == []
+    assert delivered(depth, K.pose, lambda: link.put(K.pose, b"pose2")) == [b"pose2"]
     assert delivered(decide, K.cloud, lambda: depth.put(K.cloud, b"c")) == []  # decide does not read clouds
     assert delivered(operator, K.cloud, lambda: depth.put(K.cloud, b"c")) == [b"c"]
     # decide reads every vehicle's decisions (to keep away from the others' targets)

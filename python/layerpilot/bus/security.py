@@ -76,7 +76,8 @@ def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = 
                                             subscribe=(k.pose,))  # a real camera; a photo folder's is the telemetry
         out[node_user("link", v)] = Grant(publish=(k.pose, k.health("link")),
                                           subscribe=(k.waypoint, k.state))  # state: battery RTL
-        out[node_user("depth", v)] = Grant(publish=(k.cloud, k.health("depth")), subscribe=(k.camera,))
+        out[node_user("depth", v)] = Grant(publish=(k.cloud, k.health("depth")),
+                                           subscribe=(k.camera, k.pose))  # pose: the camera clock's offset
         out[node_user("decide", v)] = Grant(publish=(k.waypoint, k.decision, k.state, k.health("decide")),
                                             subscribe=(k.layers, k.pose, keys.all_vehicles("decision")),
                                             query=(k.service("layers"),), answer=(k.aggregates,))
