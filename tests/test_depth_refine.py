@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from layerpilot.depth.config import preset_for
 from layerpilot.depth.evaluate import score
-from layerpilot.depth.live import LiveRefiner
+from layerpilot.depth.live import LiveConfig, LiveRefiner
 from layerpilot.depth.stereo import StereoMatcher
 from layerpilot.eval.fixtures import PairSpec, render_pair, sideways_flight
 from layerpilot.geometry import CameraFrame, Pose
@@ -226,3 +226,17 @@ def test_a_window_adjustment_that_diverges_leaves_the_estimates_alone(pair):
                    np.zeros(0, int), 0)
     assert not window.add(Edge(ref.stamp, partner.stamp, bad, math.nan))
     assert window.edges == [] and a.pose is partner.pose and b.pose is ref.pose
+
+
+def test_the_smallest_window_keeps_a_pair_whose_partner_is_its_oldest_keyframe(world):
+    """Window of 2: pairs (1, 0), (2, 1), then (3, 1) - the partner is the oldest keyframe left."""
+    from layerpilot.depth.window import WindowConfig
+
+    with Renderer(world, CameraConfig(width=SIZE[0], height=SIZE[1], pitch_deg=60.0)) as r:
+        frames = sideways_flight(r, (-60.0, 70.0), heading_deg=20.0, altitude=45.0, pitch_deg=60.0, speed=2.5,
+                                 frames=4, period=1.0)
+    refiner = LiveRefiner(dataclasses.replace(LiveConfig(), window=WindowConfig(size=2)))
+    for i, j in ((1, 0), (2, 1), (3, 1)):
+        assert refiner.refine(frames[i], frames[j]) is not None
+        assert sorted(refiner.window.frames) == sorted({frames[i].stamp, frames[j].stamp})
+    assert refiner.stats()["refined"] == 3

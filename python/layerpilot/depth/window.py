@@ -71,7 +71,8 @@ class Edge:
 
 
 class SlidingWindow:
-    """The last ``size`` keyframes and the edges between them, adjusted on every new edge."""
+    """The last ``size`` keyframes and the edges between them, adjusted on every new edge (the oldest
+    keyframes leave when an edge is added)."""
 
     def __init__(self, config: WindowConfig = WindowConfig()) -> None:
         self.config = config
@@ -80,14 +81,10 @@ class SlidingWindow:
         self.edges: list[Edge] = []
 
     def keyframe(self, stamp: float, prior: Pose) -> Keyframe:
-        """The keyframe of ``stamp``, added (estimate = prior) if new; the oldest leaves beyond ``size``."""
+        """The keyframe of ``stamp``, added (estimate = prior) if new."""
         if stamp not in self.frames:
             self.frames[stamp] = Keyframe(stamp, prior, prior)
             self.order.append(stamp)
-            while len(self.order) > self.config.size:
-                gone = self.order.popleft()
-                del self.frames[gone]
-                self.edges = [e for e in self.edges if e.ref != gone and e.other != gone]
         return self.frames[stamp]
 
     def add(self, edge: Edge) -> bool:
@@ -96,6 +93,11 @@ class SlidingWindow:
         if edge.ref not in self.frames or edge.other not in self.frames:
             raise ValueError("edge: both keyframes must be in the window")
         self.edges.append(edge)
+        while len(self.order) > self.config.size:  # the oldest keyframes leave, never the new edge's own
+            gone = next(s for s in self.order if s not in (edge.ref, edge.other))
+            self.order.remove(gone)
+            del self.frames[gone]
+            self.edges = [e for e in self.edges if gone not in (e.ref, e.other)]
         if not self.solve():
             self.edges.pop()
             return False
