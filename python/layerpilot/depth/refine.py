@@ -154,7 +154,10 @@ class PoseRefiner:
         keep = mask.ravel() > 0
         pa, pb, idx, t = pa[keep], pb[keep], idx[keep], t.ravel()
         if c.polish:
-            R, t = polish(ref.K, pa, pb, R, t, px)
+            try:
+                R, t = polish(ref.K, pa, pb, R, t, px)
+            except np.linalg.LinAlgError:  # degenerate inliers (all on one line): RANSAC's pose stands
+                pass
         return Relative(R, t, pa, pb, idx, len(keep)), "ok", len(keep), int(inliers)
 
     def refine(self, ref: CameraFrame, other: CameraFrame) -> Refinement:
