@@ -5,10 +5,6 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include <octomap/OcTree.h>
-
-#include <chrono>
-
 #include "voxel_map.hpp"
 
 namespace py = pybind11;
@@ -22,36 +18,6 @@ py::array_t<T> toArray(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
   py::capsule free_when_done(owned, [](void* p) { delete static_cast<std::vector<T>*>(p); });
   return py::array_t<T>(shape, owned->data(), free_when_done);
 }
-
-
-py::dict agreementDict(const Agreement& a) {
-  py::dict d;
-  d["agree"] = a.agree;
-  d["either"] = a.either;
-  d["only_a"] = a.only_a;
-  d["only_b"] = a.only_b;
-  d["occupied_a"] = a.occupied_a;
-  d["occupied_b"] = a.occupied_b;
-  return d;
-}
-
-// Stock OctoMap, linked from the same Debian library: the reference for benchmarks and tests.
-struct ReferenceOcTree {
-  octomap::OcTree tree;
-  explicit ReferenceOcTree(double resolution) : tree(resolution) {}
-
-  double insert(const Eigen::Ref<const Points>& points, const Eigen::Vector3d& origin, double max_range,
-                bool discretize) {
-    octomap::Pointcloud cloud;
-    cloud.reserve(points.rows());
-    for (Eigen::Index i = 0; i < points.rows(); ++i) cloud.push_back(points(i, 0), points(i, 1), points(i, 2));
-    const octomap::point3d o(origin.x(), origin.y(), origin.z());
-    py::gil_scoped_release release;
-    auto t0 = std::chrono::steady_clock::now();
-    tree.insertPointCloud(cloud, o, max_range, false, discretize);
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  }
-};
 
 }  // namespace
 
@@ -145,18 +111,4 @@ PYBIND11_MODULE(_core, m) {
         d["bounds_max"] = py::make_tuple(s.max[0], s.max[1], s.max[2]);
         return d;
       });
-
-  py::class_<ReferenceOcTree>(m, "_ReferenceOcTree")
-      .def(py::init<double>())
-      .def("insert", &ReferenceOcTree::insert, "insertPointCloud; returns milliseconds")
-      .def("leaves", [](const ReferenceOcTree& r) { return r.tree.getNumLeafNodes(); })
-      .def("memory_usage", [](const ReferenceOcTree& r) { return r.tree.memoryUsage(); })
-      .def("write_bt", [](ReferenceOcTree& r, const std::string& path) { return r.tree.writeBinary(path); });
-
-  m.def("_agreement", [](const VoxelMap& a, const ReferenceOcTree& b) {
-    return agreementDict(agreement(a, b.tree));
-  });
-  m.def("_agreement", [](const VoxelMap& a, const VoxelMap& b) {
-    return agreementDict(agreement(a, b));
-  });
 }

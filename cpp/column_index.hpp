@@ -56,10 +56,10 @@ class ColumnIndex {
       }
   }
 
-  // A voxel became occupied: returns true if it is now the column's top.
-  static bool addOccupied(Column& c, uint16_t z) {
+  // `count` voxels up to `z` became occupied: returns true if `z` is now the column's top.
+  static bool addOccupied(Column& c, uint16_t z, uint16_t count = 1) {
     const bool top = c.occupied == 0 || z > c.top;
-    ++c.occupied;
+    c.occupied += count;
     if (top) c.top = z;
     return top;
   }

@@ -307,7 +307,7 @@ void VoxelMap::updateLeaf(Node* node, bool created, const OcTreeKey& key, bool h
                           bool have_color, float stamp) {
   const float v = node->log_odds;
   if (!created && cannotChange(v, hit)) return;  // OctoMap's early abort
-  const bool was_occupied = !created && v > occupied_log_;
+  const bool was_occupied = !created && v >= occupied_log_;  // occupied() before the update
   // OctoMap's updateNodeLogOdds: add, then clamp.
   float& l = node->log_odds;
   l += hit ? geometry_.getProbHitLog() : geometry_.getProbMissLog();
@@ -315,7 +315,7 @@ void VoxelMap::updateLeaf(Node* node, bool created, const OcTreeKey& key, bool h
     l = geometry_.getClampingThresMinLog();
   else if (l > geometry_.getClampingThresMaxLog())
     l = geometry_.getClampingThresMaxLog();
-  const bool occupied = occupiedForColumns(*node);
+  const bool now_occupied = occupied(*node);
   if (hit) {
     Attributes& a = tree_.attributes(*node);
     a.last_seen = stamp;
@@ -325,17 +325,17 @@ void VoxelMap::updateLeaf(Node* node, bool created, const OcTreeKey& key, bool h
                     static_cast<uint8_t>((ep->rgb_sum[1] + ep->count / 2) / ep->count),
                     static_cast<uint8_t>((ep->rgb_sum[2] + ep->count / 2) / ep->count)};
   }
-  if (!occupied && !was_occupied) return;
+  if (!now_occupied && !was_occupied) return;
   Column& column = columns_.at(key[0], key[1]);
-  if (occupied && !was_occupied) {
+  if (now_occupied && !was_occupied) {
     if (ColumnIndex::addOccupied(column, key[2])) column.setTopAttributes(tree_.attributesOf(*node));
-  } else if (occupied) {
+  } else if (now_occupied) {
     if (hit && column.top == key[2]) column.setTopAttributes(tree_.attributesOf(*node));
   } else {
     auto leafAt = [&](uint16_t z) { return tree_.search(OcTreeKey(key[0], key[1], z)); };
     auto occupiedAt = [&](uint16_t z) {
       const Node* n = leafAt(z);
-      return n && occupiedForColumns(*n);
+      return n && occupied(*n);
     };
     if (ColumnIndex::removeOccupied(column, key[2], occupiedAt) && column.occupied > 0)
       column.setTopAttributes(tree_.attributesOf(*leafAt(column.top)));
@@ -353,13 +353,12 @@ void VoxelMap::finalizeInner(Node* node) {
 void VoxelMap::rebuildColumnIndex() {
   columns_.clear();
   tree_.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
-    if (!occupiedForColumns(leaf)) return;
-    const unsigned span = 1u << (CompactOctree::kDepth - depth);
+    if (!occupied(leaf)) return;
+    const unsigned span = 1u << (CompactOctree::kDepth - depth);  // at most 256 (voxel_map_io.cpp)
     for (unsigned dx = 0; dx < span; ++dx)
       for (unsigned dy = 0; dy < span; ++dy) {
         Column& c = columns_.at(base[0] + dx, base[1] + dy);
-        for (unsigned dz = 0; dz < span; ++dz)
-          if (ColumnIndex::addOccupied(c, base[2] + dz)) c.setTopAttributes(tree_.attributesOf(leaf));
+        if (ColumnIndex::addOccupied(c, base[2] + span - 1, span)) c.setTopAttributes(tree_.attributesOf(leaf));
       }
   });
 }
@@ -411,15 +410,15 @@ std::optional<Eigen::Vector3d> VoxelMap::raycast(const Eigen::Vector3d& o, const
   const point3d origin(o.x(), o.y(), o.z());
   OcTreeKey key;
   if (tree_.empty() || !geometry_.coordToKeyChecked(origin, key)) return std::nullopt;
-  auto occupied = [&](const OcTreeKey& k) {
+  auto occupiedAt = [&](const OcTreeKey& k) {
     const Node* n = tree_.search(k);
-    return n && n->log_odds >= geometry_.getOccupancyThresLog();  // OctoMap's isNodeOccupied
+    return n && occupied(*n);
   };
   auto hit = [&](const OcTreeKey& k) {
     const point3d c = geometry_.keyToCoord(k);
     return Eigen::Vector3d(c.x(), c.y(), c.z());
   };
-  if (occupied(key)) return hit(key);
+  if (occupiedAt(key)) return hit(key);
   const point3d direction = point3d(d.x(), d.y(), d.z()).normalized();
   const double res = geometry_.getResolution();
   int step[3];
@@ -448,7 +447,7 @@ std::optional<Eigen::Vector3d> VoxelMap::raycast(const Eigen::Vector3d& o, const
       for (unsigned j = 0; j < 3; ++j) dist_sq += (end(j) - origin(j)) * (end(j) - origin(j));
       if (dist_sq > max_range_sq) return std::nullopt;
     }
-    if (occupied(key)) return hit(key);
+    if (occupiedAt(key)) return hit(key);
   }
 }
 
@@ -508,7 +507,7 @@ MapStats VoxelMap::stats() const {
     hi[a] = -std::numeric_limits<double>::max();
   }
   tree_.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
-    s.occupied_leaves += occupiedForColumns(leaf);
+    s.occupied_leaves += occupied(leaf);
     const double size = geometry_.getNodeSize(depth);  // OctoMap's calcMinMax
     for (int a = 0; a < 3; ++a) {
       const double low = geometry_.keyToCoord(base[a], depth) - size / 2.0;
@@ -522,87 +521,6 @@ MapStats VoxelMap::stats() const {
       s.max[a] = hi[a];
     }
   return s;
-}
-
-namespace {
-
-// Finest-level voxels of the compact tree: f(key, occupied as OctoMap's isNodeOccupied).
-template <class F>
-void forEachVoxel(const CompactOctree& tree, const octomap::OcTree& geometry, F&& f) {
-  tree.forEachLeaf([&](const Node& leaf, const OcTreeKey& base, unsigned depth) {
-    const unsigned span = 1u << (CompactOctree::kDepth - depth);
-    const bool occ = leaf.log_odds >= geometry.getOccupancyThresLog();
-    for (unsigned dx = 0; dx < span; ++dx)
-      for (unsigned dy = 0; dy < span; ++dy)
-        for (unsigned dz = 0; dz < span; ++dz) f(OcTreeKey(base[0] + dx, base[1] + dy, base[2] + dz), occ);
-  });
-}
-
-template <class F>
-void forEachVoxel(const octomap::OcTree& tree, F&& f) {
-  const unsigned max_depth = tree.getTreeDepth();
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    const OcTreeKey base = it.getIndexKey();
-    const unsigned span = 1u << (max_depth - it.getDepth());
-    const bool occ = tree.isNodeOccupied(*it);
-    for (unsigned dx = 0; dx < span; ++dx)
-      for (unsigned dy = 0; dy < span; ++dy)
-        for (unsigned dz = 0; dz < span; ++dz) f(OcTreeKey(base[0] + dx, base[1] + dy, base[2] + dz), occ);
-  }
-}
-
-// `b_state(key)`: -1 unknown to b, else b's occupancy; `for_each_b(f)`: b's voxels.
-template <class BState, class ForEachB>
-Agreement agreementImpl(const CompactOctree& a, const octomap::OcTree& geometry, BState&& b_state,
-                        ForEachB&& for_each_b) {
-  Agreement r;
-  forEachVoxel(a, geometry, [&](const OcTreeKey& k, bool occ) {
-    r.occupied_a += occ;
-    const int state = b_state(k);
-    if (state < 0) {
-      ++r.only_a;
-      return;
-    }
-    r.agree += occ == (state == 1);
-  });
-  size_t known_b = 0;
-  for_each_b([&](const OcTreeKey& k, bool occ) {
-    ++known_b;
-    r.occupied_b += occ;
-    if (!a.search(k)) ++r.only_b;
-  });
-  r.either = known_b + r.only_a;
-  return r;
-}
-
-void checkResolutions(double a, double b) {
-  if (std::fabs(a - b) > 1e-9) throw std::invalid_argument("trees have different resolutions");
-}
-
-}  // namespace
-
-Agreement agreement(const VoxelMap& a, const octomap::OcTree& b) {
-  checkResolutions(a.resolution(), b.getResolution());
-  return a.withTree([&](const CompactOctree& ta, const octomap::OcTree& ga) {
-    return agreementImpl(
-        ta, ga, [&](const OcTreeKey& k) { const auto* n = b.search(k); return n ? int(b.isNodeOccupied(n)) : -1; },
-        [&](auto&& f) { forEachVoxel(b, f); });
-  });
-}
-
-Agreement agreement(const VoxelMap& a, const VoxelMap& b) {
-  checkResolutions(a.resolution(), b.resolution());
-  return a.withTree([&](const CompactOctree& ta, const octomap::OcTree& ga) {
-    return b.withTree([&](const CompactOctree& tb, const octomap::OcTree& gb) {
-      return agreementImpl(
-          ta, ga,
-          [&](const OcTreeKey& k) {
-            const Node* n = tb.search(k);
-            return n ? int(n->log_odds >= gb.getOccupancyThresLog()) : -1;
-          },
-          [&](auto&& f) { forEachVoxel(tb, gb, f); });
-    });
-  });
 }
 
 }  // namespace layerpilot

@@ -102,7 +102,10 @@ class VoxelMap {
   MapStats stats() const;
   double resolution() const { return geometry_.getResolution(); }
   const SensorModel& model() const { return model_; }
-  // Reader access for comparisons against reference trees (caller holds no other lock).
+  // OctoMap's isNodeOccupied: log-odds >= the occupied threshold's. The one definition of
+  // "occupied" (column index, raycast, .bt, stats, and the default of voxels()).
+  bool occupied(const Node& n) const { return n.log_odds >= occupied_log_; }
+  // Reader access to the tree, for the tests that compare it with OctoMap's (caller holds no other lock).
   template <class F>
   auto withTree(F&& f) const {
     std::shared_lock lock(mutex_);
@@ -127,7 +130,6 @@ class VoxelMap {
   bool cannotChange(float log_odds, bool hit) const;
   void finalizeInner(Node* node);
   void rebuildColumnIndex();
-  bool occupiedForColumns(const Node& n) const { return n.log_odds > occupied_log_; }
 
   SensorModel model_;
   // Key arithmetic and the sensor model's log-odds, exactly OctoMap's; holds no nodes.
@@ -138,12 +140,5 @@ class VoxelMap {
   float occupied_log_;
   mutable WriterPreferringLock mutex_;
 };
-
-// Fraction of voxels (finest level) known to either tree on which both agree (occupied vs free).
-struct Agreement {
-  size_t agree = 0, either = 0, only_a = 0, only_b = 0, occupied_a = 0, occupied_b = 0;
-};
-Agreement agreement(const VoxelMap& a, const octomap::OcTree& b);
-Agreement agreement(const VoxelMap& a, const VoxelMap& b);
 
 }  // namespace layerpilot

@@ -26,6 +26,10 @@ constexpr std::string_view kBtMagic = "# Octomap OcTree binary file";
 constexpr size_t kMaxHeader = 4096;  // OctoMap writes about 150 bytes
 constexpr unsigned kTreeDepth = 16;
 constexpr double kMaxResolution = 1000.0;  // metres; anything larger is a garbled header
+// An occupied leaf fills a column-index entry for each of its columns (cpp/column_index.hpp), so
+// a leaf of the upper levels (a damaged file: up to 65,536² columns) would take the loader down.
+// Depth 8 is a cube of 256 voxels a side, far beyond any surface a sensor sees as one.
+constexpr unsigned kMinOccupiedLeafDepth = 8;
 
 // Bytes per node that each tree type's writeData() emits, before the 1-byte child mask.
 static_assert(sizeof(Rgb) == 3 && sizeof(octomap::ColorOcTreeNode::Color) == 3);
@@ -147,8 +151,16 @@ void walkDepthFirst(ReadRecord&& read) {
 
 std::string byteAt(size_t pos) { return " at byte " + std::to_string(pos); }
 
+void checkOccupiedLeafDepth(unsigned depth, size_t pos) {
+  if (depth < kMinOccupiedLeafDepth)
+    fail("garbled node stream" + byteAt(pos) + ": an occupied leaf at depth " + std::to_string(depth) + " (" +
+         std::to_string(1u << (kTreeDepth - depth)) + " voxels a side; at most " +
+         std::to_string(1u << (kTreeDepth - kMinOccupiedLeafDepth)) + " are read)");
+}
+
 // `.ot` (OcTreeBaseImpl::writeNodesRecurs): per node its data, then one bit per existing child.
-Walk walkOt(const char* d, size_t n, const Header& h) {
+// `occupied_log`: the map's occupied threshold, for checkOccupiedLeafDepth.
+Walk walkOt(const char* d, size_t n, const Header& h, float occupied_log) {
   const size_t record = nodeBytes(h) + 1;
   const bool voxel_tree = record == kVoxelNodeBytes + 1;
   Walk w{h.data_begin, 0};
@@ -171,6 +183,7 @@ Walk walkOt(const char* d, size_t n, const Header& h) {
     const auto mask = static_cast<uint8_t>(p[record - 1]);
     if (mask != 0 && depth == kTreeDepth)
       fail("garbled node stream" + byteAt(w.end) + ": a finest-level voxel has children");
+    if (mask == 0 && log_odds >= occupied_log) checkOccupiedLeafDepth(depth, w.end);
     w.end += record;
     ++w.nodes;
     return static_cast<unsigned>(__builtin_popcount(mask));
@@ -194,6 +207,7 @@ Walk walkBt(const char* d, size_t n, const Header& h) {
       const unsigned code = (bits >> (2 * i)) & 3;
       children += code != 0;
       inner += code == 3;
+      if (code == 2) checkOccupiedLeafDepth(depth + 1, w.end);
     }
     if (children == 0 && depth > 0)
       fail("garbled node stream" + byteAt(w.end) + ": an inner node without children");
@@ -270,15 +284,16 @@ void writeOtNode(std::ostream& out, const CompactOctree& tree, const Node& n) {
 }
 
 // OccupancyOcTreeBase::writeBinaryNode: two bits per child (01 free, 10 occupied, 11 inner).
-void writeBtNode(std::ostream& out, const CompactOctree& tree, const Node& n, float occupied_log) {
+template <class Occupied>
+void writeBtNode(std::ostream& out, const CompactOctree& tree, const Node& n, const Occupied& occupied) {
   unsigned bits = 0;
   for (unsigned i = 0; i < 8; ++i)
     if (const Node* c = tree.child(n, i))
-      bits |= (CompactOctree::hasChildren(*c) ? 3u : c->log_odds >= occupied_log ? 2u : 1u) << (2 * i);
+      bits |= (CompactOctree::hasChildren(*c) ? 3u : occupied(*c) ? 2u : 1u) << (2 * i);
   out.put(static_cast<char>(bits & 0xff));
   out.put(static_cast<char>(bits >> 8));
   for (unsigned i = 0; i < 8; ++i)
-    if (const Node* c = tree.child(n, i); c && CompactOctree::hasChildren(*c)) writeBtNode(out, tree, *c, occupied_log);
+    if (const Node* c = tree.child(n, i); c && CompactOctree::hasChildren(*c)) writeBtNode(out, tree, *c, occupied);
 }
 
 }  // namespace
@@ -298,7 +313,7 @@ std::string VoxelMap::serialize(FileFormat format) const {
     if (format == FileFormat::Ot)
       writeOtNode(out, tree_, *root);
     else
-      writeBtNode(out, tree_, *root, geometry_.getOccupancyThresLog());
+      writeBtNode(out, tree_, *root, [this](const Node& c) { return occupied(c); });
   }
   if (!out) throw std::runtime_error("cannot serialize the map");
   return out.str();
@@ -306,7 +321,9 @@ std::string VoxelMap::serialize(FileFormat format) const {
 
 std::unique_ptr<VoxelMap> VoxelMap::parse(const char* data, size_t n, const SensorModel& model) {
   const Header h = parseHeader(data, n);
-  const Walk w = h.format == FileFormat::Bt ? walkBt(data, n, h) : walkOt(data, n, h);
+  const Walk w = h.format == FileFormat::Bt
+                     ? walkBt(data, n, h)
+                     : walkOt(data, n, h, static_cast<float>(octomap::logodds(model.occupied_threshold)));
   checkEnd(w, n, h);
   auto map = std::make_unique<VoxelMap>(h.res, model);
   if (h.size > 0) {

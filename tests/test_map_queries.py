@@ -49,6 +49,18 @@ def test_voxels_in_a_box(wall: VoxelMap) -> None:
         wall.voxels(np.array([1, 1, 1]), np.array([0, 0, 0]))
 
 
+def test_occupied_is_octomaps_definition_everywhere() -> None:
+    """A voxel exactly at the threshold (one hit, threshold = prob_hit) is occupied, as in OctoMap's
+    isNodeOccupied (log-odds >= threshold), for voxels(), the column layers, raycast and stats."""
+    m = VoxelMap(1.0, occupied_threshold=0.7)
+    m.insert(np.array([[5.5, 0.5, 0.5]]), np.array([0.5, 0.5, 0.5]))
+    assert m.occupancy(np.array([[5.5, 0.5, 0.5]]))[0] == pytest.approx(0.7)
+    np.testing.assert_array_equal(m.voxels(np.full(3, -9.0), np.full(3, 9.0)).centers, [[5.5, 0.5, 0.5]])
+    assert m.column_layers(5.0, 0.0, 1, 1).observed[0, 0]
+    np.testing.assert_array_equal(m.raycast(np.array([0.5, 0.5, 0.5]), np.array([1.0, 0, 0])), [5.5, 0.5, 0.5])
+    assert m.stats()["occupied_leaves"] == 1
+
+
 def test_readers_run_safely_while_frames_are_inserted() -> None:
     frames = survey_clouds(4, seed=2, width=200, height=150)
     m = VoxelMap(1.0)

@@ -18,9 +18,10 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from layerpilot.map import MapFileError, VoxelMap, agreement
+from layerpilot.map import MapFileError, VoxelMap
 from layerpilot.map.files import FOOTER_SIZE, footer
 from layerpilot.map.snapshots import SnapshotStore
+from map_voxels import assert_same_occupancy
 
 REPO = Path(__file__).resolve().parents[1]
 BOX = (np.array([-100.0, -100, -30]), np.array([100.0, 100, 30]))
@@ -165,7 +166,7 @@ def test_footer_is_invisible_to_octomap_tools(stock_files: dict[str, bytes], tmp
     octomap_tool("convert_octree", sealed, tmp_path / "back.bt")
     assert (tmp_path / "back.bt").read_bytes() == stock_files[".bt"]
     ours = VoxelMap.load(sealed)
-    assert agreement(ours, VoxelMap.load(tmp_path / "back.bt"))["fraction"] == 1.0
+    assert assert_same_occupancy(ours, VoxelMap.load(tmp_path / "back.bt")) > 10000
     ours.export_bt(tmp_path / "ours.bt")  # layerpilot's .bt ends in a footer too
     octomap_tool("convert_octree", tmp_path / "ours.bt", tmp_path / "ours.ot")
     assert re.search(r"^KLD: 0$", octomap_tool("compare_octrees", plain, tmp_path / "ours.ot"), re.M)

@@ -2,6 +2,6 @@
 
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.files import MapFileError
-from layerpilot.map.voxel_map import InsertResult, SensorModel, VoxelMap, Voxels, agreement
+from layerpilot.map.voxel_map import InsertResult, SensorModel, VoxelMap, Voxels
 
-__all__ = ["ColumnLayers", "InsertResult", "MapFileError", "SensorModel", "VoxelMap", "Voxels", "agreement"]
+__all__ = ["ColumnLayers", "InsertResult", "MapFileError", "SensorModel", "VoxelMap", "Voxels"]

@@ -138,7 +138,7 @@ class VoxelMap:
         return self._core.occupancy(_array(points, "points", np.float64, (None, 3)))
 
     def raycast(self, origin: np.ndarray, direction: np.ndarray, max_range: float = 100.0) -> np.ndarray | None:
-        """Centre of the first occupied voxel along the ray (unknown counts as free), or None."""
+        """Centre of the first occupied voxel along the ray (unknown counts as free), or None: OctoMap's castRay."""
         org = _array(origin, "origin", np.float64, (3,))
         d = _array(direction, "direction", np.float64, (3,))
         if not np.linalg.norm(d) > 0:
@@ -146,12 +146,16 @@ class VoxelMap:
         return self._core.raycast(org, d, float(max_range))
 
     def voxels(self, box_min: np.ndarray, box_max: np.ndarray, min_occupancy: float | None = None) -> Voxels:
-        """Voxels whose centre lies in the box, with occupancy >= min_occupancy (default: above the threshold)."""
+        """Voxels whose centre lies in the box, with occupancy >= ``min_occupancy``.
+
+        The default is the occupied voxels: occupancy >= the model's ``occupied_threshold``, as
+        OctoMap's ``isNodeOccupied`` (the one definition the column layers, raycast and ``.bt`` use).
+        """
         lo = _array(box_min, "box_min", np.float64, (3,))
         hi = _array(box_max, "box_max", np.float64, (3,))
         if np.any(lo > hi):
             raise ValueError(f"box_min {lo} must be <= box_max {hi}")
-        thr = self.model.occupied_threshold + 1e-6 if min_occupancy is None else float(min_occupancy)
+        thr = self.model.occupied_threshold if min_occupancy is None else float(min_occupancy)
         return Voxels(*self._core.voxels(lo, hi, thr))
 
     def to_bytes(self, suffix: str = ".ot") -> bytes:
@@ -219,9 +223,3 @@ class VoxelMap:
         s["bytes_per_leaf"] = s["total_bytes"] / s["leaves"] if s["leaves"] else 0.0
         return s
 
-
-def agreement(a: VoxelMap, b: "VoxelMap | _core._ReferenceOcTree") -> dict:
-    """Voxel-by-voxel occupancy agreement at the finest level over voxels either map knows."""
-    counts = _core._agreement(a._core, b._core if isinstance(b, VoxelMap) else b)
-    counts["fraction"] = counts["agree"] / counts["either"] if counts["either"] else 1.0
-    return counts
