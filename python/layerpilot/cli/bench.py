@@ -12,7 +12,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     bench = commands.add_parser("bench", help="speed measurements side by side with the reference")
     benches = bench.add_subparsers(dest="bench", required=True, metavar="WHAT")
 
-    b = benches.add_parser("map", help="insertion speed vs OctoMap, agreement, column layers, memory")
+    b = benches.add_parser("map", help="insertion speed vs OctoMap, voxels identical to it, column layers, memory")
     b.add_argument("--frames", type=int, default=6)
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--world-size", type=float, default=1000.0,
