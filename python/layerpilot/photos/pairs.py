@@ -2,8 +2,8 @@
 
 The frame picker, rectification, semi-global matching, filters and back-projection are
 ``layerpilot.depth``'s; this module puts the image-based poses in front of them - the bundle
-adjustment of all photos (``photos.adjust``, the default) or the per-pair refinement
-(``photos.refine``) - and says per pair what happened.
+adjustment of all photos (``depth.adjust``, the default) or the per-pair refinement
+(``depth.refine``, shared with the live depth service) - and says per pair what happened.
 """
 
 from __future__ import annotations
