@@ -40,14 +40,14 @@ def url_of(endpoint: MavlinkVehicle) -> str:
 
 def withhold_position(endpoint: MavlinkVehicle) -> threading.Event:
     """The vehicle sends no LOCAL_POSITION_NED until the returned event is set (a cold SITL's EKF)."""
-    release, send = threading.Event(), endpoint._send
+    release, send = threading.Event(), endpoint.streams.send
 
     def gated(msg_id: int) -> bool:
         if msg_id == mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED and not release.is_set():
             return False
         return send(msg_id)
 
-    endpoint._send = gated
+    endpoint.streams.send = gated
     return release
 
 
@@ -208,9 +208,9 @@ def test_link_action_prints_each_warning_once_and_readiness_reports_what_is_miss
     """A warning (here the autopilot refusing a stream request) is printed once, as `link: ...` on
     stdout; stderr stays empty on success."""
     endpoint = start_vehicle()
-    interval = endpoint._set_interval
-    endpoint._set_interval = lambda msg_id, us: (mav.MAV_RESULT_FAILED if msg_id == mav.MAVLINK_MSG_ID_ATTITUDE
-                                                 else interval(msg_id, us))
+    interval = endpoint.streams.set_interval
+    endpoint.streams.set_interval = lambda msg_id, us: (
+        mav.MAV_RESULT_FAILED if msg_id == mav.MAVLINK_MSG_ID_ATTITUDE else interval(msg_id, us))
     try:
         done = subprocess.run([sys.executable, "-m", "layerpilot.cli", "link", "--mavlink", url_of(endpoint),
                                "--timeout", "20", "takeoff", "5"], capture_output=True, text=True, timeout=60)

@@ -149,7 +149,7 @@ def test_takeoff_ends_on_a_reboot_and_on_a_mode_change(vehicle, link):
 
 
 def test_readiness_and_the_end_action_wait_end_on_a_reboot(vehicle, link):
-    real = vehicle._send  # a vehicle that never becomes ready again: no position after its reboot
+    real = vehicle.streams.send  # a vehicle that never becomes ready again: no position after its reboot
 
     def no_position(msg_id: int) -> bool:
         return False if msg_id == mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED and vehicle.boots > 1 else real(msg_id)
@@ -157,7 +157,7 @@ def test_readiness_and_the_end_action_wait_end_on_a_reboot(vehicle, link):
     link.start_guided()
     link.arm()
     link.takeoff(15.0)
-    vehicle._send = no_position
+    vehicle.streams.send = no_position
     ack = vehicle._command
     # the RTL command reboots it: the answer comes from the new boot, which is disarmed and never flies the
     # RTL (run it, and the rebooted vehicle would be in RTL: its HEARTBEAT could beat the uptime's step back)

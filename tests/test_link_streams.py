@@ -47,10 +47,10 @@ def test_readiness_waits_for_the_gps_fix_and_the_ekf(vehicle: MavlinkVehicle):
     horizontal position: not ready, naming both, until they turn good."""
     withheld = threading.Event()
     withheld.set()
-    real_gps, real_ekf = vehicle._send_gps_raw_int, vehicle._send_ekf_status_report
-    vehicle._send_gps_raw_int = lambda: vehicle._mav.gps_raw_int_send(
+    real_gps, real_ekf = vehicle.telemetry.gps_raw_int, vehicle.telemetry.ekf_status_report
+    vehicle.telemetry.gps_raw_int = lambda: vehicle.port.mav.gps_raw_int_send(
         0, mav.GPS_FIX_TYPE_2D_FIX, 0, 0, 0, 65535, 65535, 0, 65535, 4) if withheld.is_set() else real_gps()
-    vehicle._send_ekf_status_report = lambda: vehicle._mav.ekf_status_report_send(
+    vehicle.telemetry.ekf_status_report = lambda: vehicle.port.mav.ekf_status_report_send(
         EKF_FLAGS_NO_GPS, 0.0, 0.0, 0.0, 0.02, 0.0) if withheld.is_set() else real_ekf()
     with FlightLink(LinkConfig(url=url_of(vehicle), **FAST), clock=lambda: vehicle.time) as link:
         link.connect(5.0)
