@@ -30,7 +30,7 @@ class RandomClouds : public ::testing::TestWithParam<RandomCase> {};
 TEST_P(RandomClouds, EveryNodeEqualsOctoMapsAfterEveryFrame) {
   const auto [resolution, seed, max_range] = GetParam();
   const float far = static_cast<float>(40 * resolution);
-  Three maps(resolution);
+  SideBySide maps(resolution);
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> near(-0.1f * far, 0.1f * far);
   for (int frame = 0; frame < 8; ++frame) {
@@ -58,7 +58,7 @@ TEST(RealScan, EveryNodeEqualsOctoMaps) {
   const Cloud scan = makeCloud(scanPoints());
   ASSERT_EQ(scan.octomap.size(), 88206u);
   for (const double resolution : {0.2, 1.0}) {
-    Three maps(resolution);
+    SideBySide maps(resolution);
     std::mt19937 rng(5);
     maps.insert(scan, rng, octomap::point3d(0, 0, 0), 1.f, -1.0);
     EXPECT_TRUE(maps.same()) << "at " << resolution << " m";
@@ -68,7 +68,7 @@ TEST(RealScan, EveryNodeEqualsOctoMaps) {
 
 // A frame inserted twice: OctoMap updates each voxel once per frame, a hit winning over a miss.
 TEST(Insertion, RepeatedFramesClampAndPruneAsOctoMap) {
-  Three maps(0.5);
+  SideBySide maps(0.5);
   std::mt19937 rng(7);
   const Cloud wall = makeCloud(randomFrame(rng, 2000, 10.f));
   for (int i = 0; i < 8; ++i) {

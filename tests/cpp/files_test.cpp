@@ -30,8 +30,8 @@ std::string btOf(const octomap::AbstractOccupancyOcTree& tree) {
 }
 
 // The same random frames (with color and time) in layerpilot's map and both OctoMap trees.
-struct Maps : Three {
-  Maps() : Three(0.5) {
+struct Maps : SideBySide {
+  Maps() : SideBySide(0.5) {
     std::mt19937 rng(21);
     for (int frame = 0; frame < 5; ++frame)
       insert(makeCloud(randomFrame(rng, 2000, 15.f)), rng, octomap::point3d(0.3f * frame, -0.2f, 0.1f),

@@ -18,7 +18,7 @@ struct Seed {
 };
 
 std::vector<Seed> seeds() {
-  Three maps(0.5);
+  SideBySide maps(0.5);
   std::mt19937 rng(3);
   for (int frame = 0; frame < 2; ++frame)
     maps.insert(makeCloud(randomFrame(rng, 300, 6.f)), rng, octomap::point3d(0, 0, 0), 1.f + frame, 8.0);

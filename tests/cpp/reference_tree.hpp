@@ -51,12 +51,13 @@ class VoxelTree : public octomap::OccupancyOcTreeBase<VoxelNode> {
 
 inline Attributes attributesOfNode(const VoxelNode& n) { return n.attributes; }
 
-// One frame into layerpilot's map, OctoMap's OcTree and the attribute reference, with colors and a time.
-struct Three {
+// layerpilot's map, OctoMap's OcTree and the attribute reference side by side: each frame goes into
+// all three, with colors and a time.
+struct SideBySide {
   VoxelMap ours;
   octomap::OcTree stock;
   VoxelTree reference;
-  explicit Three(double resolution) : ours(resolution, SensorModel{}), stock(resolution), reference(resolution) {}
+  explicit SideBySide(double resolution) : ours(resolution, SensorModel{}), stock(resolution), reference(resolution) {}
 
   void insert(const Cloud& c, std::mt19937& rng, const octomap::point3d& origin, float stamp, double max_range) {
     Colors colors(c.points.rows(), 3);
