@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from layerpilot.sim.auto_mission import TAKEOFF_REACHED_M
 from layerpilot.sim.auto_mode import AutoMode
 from layerpilot.sim.autopilot_state import AutopilotState
 from layerpilot.sim.landing import Landing
 from layerpilot.sim.mode_commands import ModeCommands
-
-TAKEOFF_REACHED_M = 0.3  # PX4's TAKEOFF mode turns to LOITER this close to its altitude
 
 
 class Flight:

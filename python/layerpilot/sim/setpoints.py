@@ -10,6 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.link import modes
 from layerpilot.link.frames import local_ned_to_map, ned_to_enu, yaw_enu_to_ned, yaw_ned_to_enu
+from layerpilot.sim.auto_mission import LOOK_AT_MIN_DISTANCE_M
 from layerpilot.sim.autopilot_state import AutopilotState
 
 POS_IGNORE = 0b111
@@ -17,7 +18,6 @@ VEL_IGNORE = 0b111000
 YAW_IGNORE = 1024
 YAW_RATE_IGNORE = 2048
 GUIDED_VELOCITY_TIMEOUT_S = 3.0  # ArduCopter stops a velocity-only guided command after 3 s
-LOOK_AT_MIN_DISTANCE_M = 2.0  # ArduCopter turns toward a guided destination only while farther than this
 
 
 class Setpoints:
