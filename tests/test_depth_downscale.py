@@ -11,6 +11,7 @@ import numpy as np
 
 from layerpilot.depth.downscale import MAX_WIDTH, limit_pixels, processing_intrinsics
 from layerpilot.depth.evaluate import score
+from layerpilot.depth.source import MAX_DEPTH_POINTS, GroundTruthDepth
 from layerpilot.eval.fixtures import sideways_flight
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, Pose
 from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
@@ -65,3 +66,15 @@ def test_a_12_mp_pair_costs_what_a_640_pixel_pair_costs():
     assert s.precision >= 0.9 and s.median_rel_error < 0.03, s
     # the matcher sees 640x480 either way: the resize is all the big pair adds (generous for a loaded machine)
     assert t_big < 3 * t_small + 1.0, (t_big, t_small)
+
+
+def test_a_huge_depth_image_is_strided_to_the_point_cap() -> None:
+    """The ground-truth source bounds its cloud before back-projecting: a 12.6 MP depth image gives at most
+    MAX_DEPTH_POINTS points; a 640x480 one keeps every pixel at stride 1 (the evaluation's truth is unchanged)."""
+    def frame(w: int, h: int) -> CameraFrame:
+        return CameraFrame(np.zeros((h, w, 3), np.uint8), Pose(np.zeros(3)), CameraConfig(width=w, height=h).intrinsics,
+                           0.0, depth=np.full((h, w), 40.0, np.float32))
+
+    huge = GroundTruthDepth(100.0, stride=2).push(frame(4096, 3072))
+    assert 0.8 * MAX_DEPTH_POINTS < len(huge) <= MAX_DEPTH_POINTS
+    assert len(GroundTruthDepth(100.0, stride=1).push(frame(640, 480))) == 640 * 480

@@ -9,6 +9,7 @@ ideal reference for the map.
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Protocol
 
 import numpy as np
@@ -62,8 +63,15 @@ class StereoDepth:
                 **refined}
 
 
+MAX_DEPTH_POINTS = 640 * 480  # a depth image gives at most this many points: a larger one is strided more
+
+
 class GroundTruthDepth:
-    """Back-project ``frame.depth`` (z-depth, metres); pixels beyond ``max_depth`` are dropped."""
+    """Back-project ``frame.depth`` (z-depth, metres); pixels beyond ``max_depth`` are dropped.
+
+    The cost is bounded before it is paid: a frame whose every ``stride``-th pixel would give more than
+    ``MAX_DEPTH_POINTS`` points is read with the smallest larger stride that keeps within it (a 12.6 MP
+    depth image: stride 7, 257 k points, instead of 3.1 M at stride 2)."""
 
     def __init__(self, max_depth: float = 100.0, stride: int = 1) -> None:
         if stride < 1:
@@ -77,7 +85,8 @@ class GroundTruthDepth:
         if frame.depth is None:
             self.skipped_no_depth += 1
             return None
-        s = self.stride
+        h, w = frame.depth.shape[:2]
+        s = max(self.stride, math.ceil(math.sqrt(h * w / MAX_DEPTH_POINTS)))
         depth = frame.depth[::s, ::s]
         valid = depth > 0  # NaN and inf fail one of the two comparisons
         valid &= depth <= self.max_depth
