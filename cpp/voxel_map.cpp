@@ -275,8 +275,9 @@ void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vecto
       Node* next = tree_.child(*node, pos);
       if (!next) {
         if (!CompactOctree::hasChildren(*node) && !created) {
-          // A pruned leaf: OctoMap skips updates that cannot change it, else expands it.
-          if (cannotChange(node->log_odds, hit)) {
+          // A pruned leaf: OctoMap skips updates that cannot change it, else expands it. A hit
+          // always expands it: the voxel's own color, time and distance change.
+          if (!hit && cannotChange(node->log_odds, hit)) {
             skipped = true;
             break;
           }
@@ -306,15 +307,18 @@ void VoxelMap::applyUpdates(const std::vector<uint64_t>& codes, const std::vecto
 void VoxelMap::updateLeaf(Node* node, bool created, const OcTreeKey& key, bool hit, const Endpoint* ep,
                           bool have_color, float stamp) {
   const float v = node->log_odds;
-  if (!created && cannotChange(v, hit)) return;  // OctoMap's early abort
+  // OctoMap's early abort: at a clamping bound the log-odds stay; a hit still updates the attributes.
+  const bool clamped = !created && cannotChange(v, hit);
+  if (clamped && !hit) return;
   const bool was_occupied = !created && v >= occupied_log_;  // occupied() before the update
-  // OctoMap's updateNodeLogOdds: add, then clamp.
-  float& l = node->log_odds;
-  l += hit ? geometry_.getProbHitLog() : geometry_.getProbMissLog();
-  if (l < geometry_.getClampingThresMinLog())
-    l = geometry_.getClampingThresMinLog();
-  else if (l > geometry_.getClampingThresMaxLog())
-    l = geometry_.getClampingThresMaxLog();
+  if (!clamped) {  // OctoMap's updateNodeLogOdds: add, then clamp.
+    float& l = node->log_odds;
+    l += hit ? geometry_.getProbHitLog() : geometry_.getProbMissLog();
+    if (l < geometry_.getClampingThresMinLog())
+      l = geometry_.getClampingThresMinLog();
+    else if (l > geometry_.getClampingThresMaxLog())
+      l = geometry_.getClampingThresMaxLog();
+  }
   const bool now_occupied = occupied(*node);
   if (hit) {
     Attributes& a = tree_.attributes(*node);

@@ -61,6 +61,19 @@ def test_occupied_is_octomaps_definition_everywhere() -> None:
     assert m.stats()["occupied_leaves"] == 1
 
 
+def test_a_voxel_at_the_upper_bound_keeps_its_attributes_current() -> None:
+    """Its occupancy no longer changes (OctoMap's clamping), but every hit updates time, distance and color."""
+    m = VoxelMap(1.0)
+    for t in range(10):
+        m.insert(np.array([[5.5, 0.5, 0.5]]), np.array([0.05 + 0.1 * t, 0.5, 0.5]), np.array([[t, 2 * t, 3 * t]], np.uint8), stamp=t)
+    assert m.occupancy(np.array([[5.5, 0.5, 0.5]]))[0] == pytest.approx(0.971, abs=1e-3)
+    v = m.voxels(np.full(3, -9.0), np.full(3, 9.0))
+    assert v.last_seen.tolist() == [9.0] and v.color.tolist() == [[9, 18, 27]]
+    assert v.min_distance[0] == pytest.approx(5.5 - 0.95)  # the nearest: the last, from x = 0.95
+    cols = m.column_layers(5.0, 0.0, 1, 1)
+    assert cols.last_seen[0, 0] == 9.0
+
+
 def test_readers_run_safely_while_frames_are_inserted() -> None:
     frames = survey_clouds(4, seed=2, width=200, height=150)
     m = VoxelMap(1.0)

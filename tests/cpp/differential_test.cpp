@@ -82,6 +82,13 @@ TEST(Insertion, RepeatedFramesClampAndPruneAsOctoMap) {
   }
   EXPECT_GT(clamped_max, 100u);
   EXPECT_GT(clamped_min, 100u);
+  size_t hit = 0;  // every voxel hit was hit in each frame: all were last seen in the last one,
+  for (const auto& n : nodesOf(maps.ours))  // those at the upper bound included
+    if (!n.inner && std::isfinite(n.attributes.last_seen)) {
+      ++hit;
+      EXPECT_EQ(n.attributes.last_seen, 7.f) << describe(n);
+    }
+  EXPECT_GT(hit, 100u);
 }
 
 // castRay (unknown cells ignored, as VoxelMap::raycast) from random origins in random directions.

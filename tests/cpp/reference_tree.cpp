@@ -51,8 +51,10 @@ void VoxelTree::insert(const Cloud& cloud, const Colors& colors, const octomap::
   for (const auto& key : free_cells) updateNode(key, false, true);
   for (const auto& key : occupied_cells) {
     const VoxelNode* before = search(key);
-    if (before && before->getLogOdds() >= clamping_thres_max) continue;  // OctoMap's early abort: no change
-    VoxelNode* node = updateNode(key, true, true);
+    // At the upper bound updateNode would stop at a pruned leaf; setNodeValue expands it down to
+    // the voxel, whose attributes change while its log-odds stay.
+    VoxelNode* node = before && before->getLogOdds() >= clamping_thres_max ? setNodeValue(key, clamping_thres_max, true)
+                                                                            : updateNode(key, true, true);
     const Hits& h = hits.at(key);
     Attributes& a = node->attributes;
     a.last_seen = stamp;

@@ -35,8 +35,9 @@ class VoxelTree : public octomap::OccupancyOcTreeBase<VoxelNode> {
   std::string getTreeType() const override { return "LayerpilotVoxelTree"; }
 
   // OctoMap's discretized insertPointCloud (computeDiscreteUpdate, free then occupied cells,
-  // OctoMap's updateNode), then layerpilot's attribute rules on each hit voxel whose log-odds
-  // changed: the mean color of the frame's points in it, `stamp`, the nearest point's distance.
+  // OctoMap's updateNode), then layerpilot's attribute rules on every hit voxel (also one already
+  // at the upper clamping bound): the mean color of the frame's points in it, `stamp`, the nearest
+  // point's distance.
   // Inner nodes and pruning are done once at the end (updateInnerOccupancy, prune).
   void insert(const Cloud& cloud, const Colors& colors, const octomap::point3d& origin, float stamp,
               double max_range);
