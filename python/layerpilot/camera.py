@@ -18,6 +18,9 @@ from layerpilot.config import check_range
 from layerpilot.geometry import CameraIntrinsics, Pose
 
 
+MOUNT_PITCH_DEG = 60.0  # the camera's default mount: degrees below the horizon (90 = nadir), one for every camera
+
+
 @dataclass(frozen=True)
 class CameraConfig:
     """Image size in pixels, horizontal field of view and mount pitch in degrees, clip range in metres."""
@@ -25,7 +28,7 @@ class CameraConfig:
     width: int = 640
     height: int = 480
     hfov_deg: float = 90.0
-    pitch_deg: float = 60.0
+    pitch_deg: float = MOUNT_PITCH_DEG
     near: float = 0.1
     far: float = 2000.0
 
@@ -43,7 +46,7 @@ class CameraConfig:
         return CameraIntrinsics.from_fov(self.width, self.height, self.hfov_deg)
 
 
-def camera_pose(position: np.ndarray | tuple[float, float, float], yaw: float, pitch_deg: float = 60.0) -> Pose:
+def camera_pose(position: np.ndarray | tuple[float, float, float], yaw: float, pitch_deg: float = MOUNT_PITCH_DEG) -> Pose:
     """Pose (camera -> map) of the camera on a vehicle at ``position`` (ENU) with ENU ``yaw`` (rad),
     pitched down by ``pitch_deg`` (90 = straight down)."""
     position = np.asarray(position, dtype=np.float64)

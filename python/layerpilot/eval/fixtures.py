@@ -25,12 +25,12 @@ import numpy as np
 
 from layerpilot.depth.picking import altitude_scene_depth
 from layerpilot.geometry import CameraFrame, CameraIntrinsics, PointCloud, Pose
-from layerpilot.camera import CameraConfig, camera_pose
+from layerpilot.camera import MOUNT_PITCH_DEG, CameraConfig, camera_pose
 
 
 # --- survey leg over the forest ---------------------------------------------------------------
 
-def survey_clouds(count: int, seed: int = 0, width: int = 640, height: int = 480, pitch_deg: float = 60.0,
+def survey_clouds(count: int, seed: int = 0, width: int = 640, height: int = 480, pitch_deg: float = MOUNT_PITCH_DEG,
                   max_depth: float = math.inf) -> list[PointCloud]:
     """Ground-truth depth clouds of ``count`` frames along a survey leg over the default forest of ``seed``.
 

@@ -7,7 +7,8 @@ import dataclasses
 from layerpilot.mission import flight
 from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.core import MissionCore
-from layerpilot.mission.depth_service import DepthService, stereo_preset
+from layerpilot.depth.config import preset_for
+from layerpilot.mission.depth_service import DepthService
 from layerpilot.mission.map_service import Volume
 from layerpilot.mission.pilot import Pilot, load_pilot_behavior
 
@@ -19,7 +20,7 @@ def build_pilot(mission: MissionCore) -> Pilot:
     if cfg.pattern is None:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
         camera, max_range = mission.camera, mission.depth.max_depth
         behavior = flight.flight_behavior(behavior, camera, max_range)
-        ratio = stereo_preset(camera.width).pick.target_baseline_ratio
+        ratio = preset_for(camera.width).pick.target_baseline_ratio
         speed = flight.cruise_speed(behavior, camera, mission.frame_rate_hz, ratio, cfg.speed)
         view = (flight.camera_view(behavior, HeadingPolicy(behavior, cfg.home), camera, max_range)
                 if "view_gain" in behavior.layer_names else None)
@@ -31,7 +32,7 @@ def build_pilot(mission: MissionCore) -> Pilot:
     if cfg.pattern == "lawnmower":
         waypoints = patterns.lawnmower(centre, radius, altitude, camera, altitude)
         # straight legs at top speed put frames too far apart for stereo: fly at the survey speed
-        ratio = stereo_preset(camera.width).pick.target_baseline_ratio
+        ratio = preset_for(camera.width).pick.target_baseline_ratio
         speed = patterns.survey_speed(camera, altitude, mission.frame_rate_hz, ratio)
     else:
         waypoints, speed = patterns.orbit(centre, radius, altitude), cfg.speed

@@ -20,7 +20,7 @@ import numpy as np
 
 from layerpilot.config import ConfigError, check_range
 from layerpilot.geometry import Pose
-from layerpilot.camera import camera_pose
+from layerpilot.camera import MOUNT_PITCH_DEG, camera_pose
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class CameraSettings:
 
     source: str = "sim"  # sim (the simulator node renders the frames) or what `layerpilot camera` opens
     calibration: str = ""  # OpenCV YAML calibration file of the real camera (photos.calibration)
-    pitch_deg: float = 90.0  # mount: degrees below the body's horizon (90 = nadir)
+    pitch_deg: float = MOUNT_PITCH_DEG  # mount: degrees below the body's horizon (90 = nadir)
     yaw_deg: float = 0.0  # mount: degrees left of the body's forward axis
     offset: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m, body FLU, camera centre
     gimbal: bool = True  # the camera keeps only the body's heading (a stabilised gimbal); false: hard mounted

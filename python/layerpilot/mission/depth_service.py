@@ -56,12 +56,6 @@ class DepthServiceConfig:
         return LiveConfig(window=window, max_offset=self.max_clock_offset, gimbal=gimbal)
 
 
-def stereo_preset(width: int, fx: float | None = None) -> DepthConfig:
-    """The stereo settings for an image width and focal length in pixels (default: a 90 deg camera):
-    what the service uses and what survey speeds assume."""
-    return preset_for(width, fx)
-
-
 class DepthService:
     """Frames -> clouds; counts frames, clouds and the source's reasons for skipping.
 
@@ -86,7 +80,7 @@ class DepthService:
         """The frame's cloud, or None (no partner yet, skipped, or no points)."""
         if self.source is None:  # stereo presets depend on the size matched at: chosen on the first frame
             k = processing_intrinsics(frame.intrinsics)
-            self.source = StereoDepth(stereo_preset(k.width, k.fx), refiner=self.refiner)
+            self.source = StereoDepth(preset_for(k.width, k.fx), refiner=self.refiner)
         self.frames += 1
         if self.refiner is None:
             self._reported.append((frame.stamp, frame.pose))
