@@ -104,14 +104,14 @@ def test_schedule_phases_latch_in_order() -> None:
 def test_schedule_switches_the_decision(tmp_path: Path) -> None:
     from layerpilot.decide import DecisionMaker
     from layerpilot.grid import GridGeometry
-    from layerpilot.layers import LayerSet
+    from layerpilot.layers import FeatureLayers
 
     g = GridGeometry(-60.0, -60.0, 1.0, 120, 120)
     x, y = g.cell_centers()
     east = np.exp(-((x - 40) ** 2 + y**2) / 50).astype(np.float32)
     west = np.exp(-((x + 40) ** 2 + y**2) / 50).astype(np.float32)
     observed = np.zeros(g.shape, bool)
-    layers = lambda obs: LayerSet(g, {"fringe": east, "time": west}, obs, np.zeros(g.shape, np.float32),  # noqa: E731
+    layers = lambda obs: FeatureLayers(g, {"fringe": east, "time": west}, obs, np.zeros(g.shape, np.float32),  # noqa: E731
                                   np.zeros((*g.shape, 3), np.uint8))
     b = load_behavior("explore-then-patrol")
     dm = DecisionMaker(b)

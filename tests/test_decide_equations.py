@@ -17,13 +17,13 @@ from layerpilot.decide import (
     zone_mask,
 )
 from layerpilot.grid import GridGeometry
-from layerpilot.layers import LayerSet
+from layerpilot.layers import FeatureLayers
 
 
-def layer_set(g: GridGeometry, observed: np.ndarray | None = None, **layers: np.ndarray) -> LayerSet:
+def layer_set(g: GridGeometry, observed: np.ndarray | None = None, **layers: np.ndarray) -> FeatureLayers:
     h, w = g.shape
     obs = np.ones((h, w), bool) if observed is None else observed
-    return LayerSet(g, {k: v.astype(np.float32) for k, v in layers.items()}, obs,
+    return FeatureLayers(g, {k: v.astype(np.float32) for k, v in layers.items()}, obs,
                     np.zeros((h, w), np.float32), np.zeros((h, w, 3), np.uint8))
 
 

@@ -7,17 +7,17 @@ import pytest
 
 from layerpilot.decide import Behavior, DecisionMaker, Retarget, Terrain, terrain_altitude
 from layerpilot.grid import GridGeometry
-from layerpilot.layers import LayerSet
+from layerpilot.layers import FeatureLayers
 
 G = GridGeometry(-100.0, -100.0, 1.0, 200, 200)
 
 
-def _blobs(*centres: tuple[float, float, float]) -> LayerSet:
+def _blobs(*centres: tuple[float, float, float]) -> FeatureLayers:
     x, y = G.cell_centers()
     f = np.zeros(G.shape, np.float32)
     for cx, cy, height in centres:
         f = np.maximum(f, height * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 30.0)).astype(np.float32)
-    return LayerSet(G, {"fringe": f}, np.ones(G.shape, bool), np.zeros(G.shape, np.float32),
+    return FeatureLayers(G, {"fringe": f}, np.ones(G.shape, bool), np.zeros(G.shape, np.float32),
                     np.zeros((*G.shape, 3), np.uint8))
 
 
@@ -75,7 +75,7 @@ def test_terrain_altitude_by_hand() -> None:
 def test_terrain_aware_waypoints() -> None:
     layers = _blobs((40.0, 0.0, 1.0))
     elevation = np.where(np.abs(G.cell_centers()[1]) < 3, 12.0, 0.0).astype(np.float32)
-    layers = LayerSet(G, layers.layers, layers.observed, elevation, layers.rgb)
+    layers = FeatureLayers(G, layers.layers, layers.observed, elevation, layers.rgb)
     flat = DecisionMaker(Behavior(weights={"fringe": 1.0}, altitude=50.0)).decide(layers, (0.0, 0.0, 50.0), 0.0)
     assert flat.waypoint[2] == 50.0
     aware = Behavior(weights={"fringe": 1.0}, altitude=50.0, terrain=Terrain(enabled=True, clearance=25.0))

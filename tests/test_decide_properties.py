@@ -8,16 +8,16 @@ from hypothesis import strategies as st
 
 from layerpilot.decide import Area, Behavior, DecisionMaker, zone_mask
 from layerpilot.grid import GridGeometry
-from layerpilot.layers import LayerSet
+from layerpilot.layers import FeatureLayers
 
 G = GridGeometry(-40.0, -40.0, 1.0, 80, 80)
 
 
-def _layers(seed: int, observed_fraction: float) -> LayerSet:
+def _layers(seed: int, observed_fraction: float) -> FeatureLayers:
     rng = np.random.default_rng(seed)
     observed = rng.random(G.shape) < observed_fraction
     named = {k: np.where(observed, rng.random(G.shape), 0).astype(np.float32) for k in ("a", "b")}
-    return LayerSet(G, named, observed, np.zeros(G.shape, np.float32), np.zeros((*G.shape, 3), np.uint8))
+    return FeatureLayers(G, named, observed, np.zeros(G.shape, np.float32), np.zeros((*G.shape, 3), np.uint8))
 
 
 coord = st.floats(-60.0, 60.0, allow_nan=False)
@@ -62,7 +62,7 @@ def test_waypoints_stay_in_the_area_and_outside_r_e(seed, fraction, position, ho
 def test_zero_weight_removes_a_layers_influence(seed, weight, position) -> None:
     layers = _layers(seed, 0.7)
     rng = np.random.default_rng(seed + 1)
-    other = LayerSet(G, {"a": layers["a"], "b": rng.random(G.shape).astype(np.float32)}, layers.observed,
+    other = FeatureLayers(G, {"a": layers["a"], "b": rng.random(G.shape).astype(np.float32)}, layers.observed,
                      layers.elevation_m, layers.rgb)
     behavior = Behavior(weights={"a": weight, "b": 0.0}, r_e=5.0, r_i=50.0, area=Area(radius=35.0))
     one = DecisionMaker(behavior, seed=seed).decide(layers, position, 0.0, intermediates=True)

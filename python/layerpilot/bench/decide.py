@@ -18,7 +18,7 @@ import numpy as np
 
 from layerpilot.decide.behavior import Behavior
 from layerpilot.grid import GridGeometry, GridWindow
-from layerpilot.layers.layerset import LayerSet
+from layerpilot.layers.feature_layers import FeatureLayers
 from layerpilot.map.columns import ColumnLayers
 
 TARGETS_MS = {512: 5.0, 1024: 10.0}  # issue 18: layers + decision per tick
@@ -160,7 +160,7 @@ def time_ticks(cols: ColumnLayers, base: Behavior, repeat: int, seed: int = 0) -
             layers[name] = compute_layers(cols, ctx, [name], window=window)[name]
             parts[name].append(1000 * (time.perf_counter() - t0))
         t0 = time.perf_counter()
-        decision = maker.decide(LayerSet(g, layers, cols.observed, cols.elevation, cols.color, ctx.now, window),
+        decision = maker.decide(FeatureLayers(g, layers, cols.observed, cols.elevation, cols.color, ctx.now, window),
                                 position, clock["now"], widen=lambda w: compute_layers(cols, ctx, names, window=w))
         parts["decision"].append(1000 * (time.perf_counter() - t0))
         clock["position"] = decision.waypoint

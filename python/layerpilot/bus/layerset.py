@@ -1,7 +1,7 @@
 """Grid layers on the bus (proto ``LayerSet``): a grid geometry plus named 2D layers in a compact encoding.
 
 ``GridLayersMessage`` is the wire form (what the map server publishes: its column layers, or any
-named arrays); the decision maker's feature layers are ``layerpilot.layers.LayerSet``.
+named arrays); the decision maker's feature layers are ``layerpilot.layers.FeatureLayers``.
 
 Floats travel as float16 or as uint8/uint16 with scale and offset (the top three codes
 mean -inf, +inf and NaN), booleans as packed bits, colors raw; everything LZ4'd (a

@@ -22,7 +22,7 @@ from layerpilot.decide.history import PathHistory
 from layerpilot.decide.schedule import WeightSchedule
 from layerpilot.decide.terrain import terrain_altitude
 from layerpilot.grid import GridGeometry, GridWindow
-from layerpilot.layers.layerset import LayerSet
+from layerpilot.layers.feature_layers import FeatureLayers
 
 
 def distance_preference(distance: np.ndarray, r_e: float, r_i: float) -> np.ndarray:
@@ -56,7 +56,7 @@ class _Grid:
 class _Scores:
     """Every term on ``window`` (arrays of its shape); cells are (row, col) of the whole grid."""
 
-    layers: LayerSet
+    layers: FeatureLayers
     grid: _Grid
     window: GridWindow
     position: Sequence[float]
@@ -123,18 +123,18 @@ class DecisionMaker:
         self._target_p = 0.0
         self._switched_at = -np.inf
         self._grid_cache: _Grid | None = None
-        self._widen: Callable[[GridWindow], LayerSet] | None = None
+        self._widen: Callable[[GridWindow], FeatureLayers] | None = None
         self.last_tick: TickTerms | None = None  # the terms of the last decide or reconsider, for a viewer
 
     def decide(
         self,
-        layers: LayerSet,
+        layers: FeatureLayers,
         position: Sequence[float],
         time: float,
         *,
         intermediates: bool = False,
         avoid: Sequence[Sequence[float]] = (),
-        widen: Callable[[GridWindow], LayerSet] | None = None,
+        widen: Callable[[GridWindow], FeatureLayers] | None = None,
     ) -> Decision:
         """A decision tick: the next waypoint from ``position`` (map frame) at mission ``time``.
 
@@ -153,7 +153,7 @@ class DecisionMaker:
         return decision
 
     def reconsider(
-        self, layers: LayerSet, position: Sequence[float], time: float, *, avoid: Sequence[Sequence[float]] = ()
+        self, layers: FeatureLayers, position: Sequence[float], time: float, *, avoid: Sequence[Sequence[float]] = ()
     ) -> Decision | None:
         """While flying: a new target if retargeting is on and another cell beats the current one.
 
@@ -211,7 +211,7 @@ class DecisionMaker:
         return self._grid_cache
 
     def _evaluate(
-        self, layers: LayerSet, position: Sequence[float], time: float, tick: bool, avoid: Sequence[Sequence[float]],
+        self, layers: FeatureLayers, position: Sequence[float], time: float, tick: bool, avoid: Sequence[Sequence[float]],
         window: GridWindow | None = None,
     ) -> _Scores:
         if len(position) < 2 or not np.all(np.isfinite(np.asarray(position[:3], float))):

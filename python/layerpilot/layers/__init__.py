@@ -5,7 +5,7 @@ Built in: ``fringe`` (edge of the known map), ``time`` (time since last seen),
 of each column for pictures. More layers plug in through the registry.
 """
 
-from layerpilot.layers.layerset import LayerSet, check_layer
+from layerpilot.layers.feature_layers import FeatureLayers, check_layer
 from layerpilot.layers.registry import (
     LayerContext,
     LayerOptions,
@@ -19,7 +19,7 @@ from layerpilot.layers.registry import (
 __all__ = [
     "LayerContext",
     "LayerOptions",
-    "LayerSet",
+    "FeatureLayers",
     "check_layer",
     "compute_layers",
     "layer_names",

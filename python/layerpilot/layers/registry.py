@@ -29,7 +29,7 @@ import numpy as np
 
 from layerpilot.layers import features, view_gain
 from layerpilot.layers.view_gain import CameraView
-from layerpilot.layers.layerset import LayerSet
+from layerpilot.layers.feature_layers import FeatureLayers
 from layerpilot.grid import GridWindow
 from layerpilot.map.columns import ColumnLayers
 
@@ -140,8 +140,8 @@ def compute_layers(
     names: Iterable[str] | None = None,
     voxel_map: Any = None,
     window: GridWindow | None = None,
-) -> LayerSet:
-    """Compute the named layers (default: every one the context allows) into a checked LayerSet.
+) -> FeatureLayers:
+    """Compute the named layers (default: every one the context allows) into a checked FeatureLayers.
 
     ``window``: only those cells of each layer (see the module docstring).
     """
@@ -149,8 +149,8 @@ def compute_layers(
     unknown = [n for n in names if n not in _REGISTRY]
     if unknown:
         raise ValueError(f"names: no layer named {', '.join(map(repr, unknown))}; known: {', '.join(_REGISTRY)}")
-    layers = {name: _layer(name, columns, voxel_map, context, window) for name in names}  # LayerSet checks them
-    return LayerSet(
+    layers = {name: _layer(name, columns, voxel_map, context, window) for name in names}  # FeatureLayers checks them
+    return FeatureLayers(
         columns.geometry,
         layers,
         columns.observed,
@@ -170,7 +170,7 @@ def _layer(name: str, columns: ColumnLayers, voxel_map: Any, context: LayerConte
         return fn(columns, voxel_map, context, window=window)
     whole = fn(columns, voxel_map, context)
     if not isinstance(whole, np.ndarray) or whole.shape != columns.geometry.shape:
-        return whole  # LayerSet names the layer and what is wrong with it
+        return whole  # FeatureLayers names the layer and what is wrong with it
     return whole[window.slices]
 
 

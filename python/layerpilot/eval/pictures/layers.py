@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from layerpilot.layers.layerset import LayerSet
+from layerpilot.layers.feature_layers import FeatureLayers
 
 if TYPE_CHECKING:
     from layerpilot.decide.decision import Decision
@@ -33,7 +33,7 @@ TITLES = {
 }
 
 
-def _images(layers: LayerSet, decision: Decision | None) -> list[tuple[str, np.ndarray, dict]]:
+def _images(layers: FeatureLayers, decision: Decision | None) -> list[tuple[str, np.ndarray, dict]]:
     images: list[tuple[str, np.ndarray, dict]] = [("color", np.where(layers.observed[..., None], layers.color, 1.0), {})]
     images.append(("elevation_m", np.ma.masked_invalid(layers.elevation_m),
                    {"cmap": "terrain", "label": "top of highest occupied voxel (m)"}))
@@ -48,7 +48,7 @@ def _images(layers: LayerSet, decision: Decision | None) -> list[tuple[str, np.n
     return images
 
 
-def _draw(ax, fig, name: str, image: np.ndarray, opts: dict, layers: LayerSet,
+def _draw(ax, fig, name: str, image: np.ndarray, opts: dict, layers: FeatureLayers,
           decision: Decision | None, position: tuple[float, ...] | None) -> None:
     opts = dict(opts)
     label = opts.pop("label", None)
@@ -77,7 +77,7 @@ def _draw(ax, fig, name: str, image: np.ndarray, opts: dict, layers: LayerSet,
 
 
 def render(
-    layers: LayerSet,
+    layers: FeatureLayers,
     out_dir: str | Path,
     decision: Decision | None = None,
     position: tuple[float, ...] | None = None,

@@ -1,4 +1,4 @@
-"""LayerSet: named float32 layers in [0, 1] on one grid, plus what people look at (color, elevation)."""
+"""FeatureLayers: named float32 layers in [0, 1] on one grid, plus what people look at (color, elevation)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from layerpilot.layers import features
 
 
 @dataclass(frozen=True)
-class LayerSet:
+class FeatureLayers:
     """Decision layers by name (float32 (h, w) in [0, 1]) with the grid they live on.
 
     ``observed`` (bool) and ``elevation_m`` (float32 metres, NaN unobserved) travel along
