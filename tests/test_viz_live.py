@@ -23,7 +23,7 @@ from browser import Chromium
 from conftest import SMALL_MISSION_NODES, cli_process, free_tcp_port, start_up, stop_up, wait_for
 
 SCHEMAS = {"camera": "layerpilot.CameraFrame", "cloud": "layerpilot.PointCloud", "pose": "layerpilot.VehicleState",
-           "layers": "layerpilot.FeatureLayers", "decision": "layerpilot.Decision", "waypoint": "layerpilot.Waypoint",
+           "layers": "layerpilot.LayerSet", "decision": "layerpilot.Decision", "waypoint": "layerpilot.Waypoint",
            "state": "layerpilot.MissionState",
            **{f"health/{n}": "layerpilot.NodeHealth" for n in ("sim", "link", "depth", "decide", "map-server")}}
 
