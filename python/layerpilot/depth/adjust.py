@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.depth.config import AdjustConfig
-from layerpilot.depth.refine import HALF_TURN, PoseRefiner, angle_deg
+from layerpilot.depth.refine import HALF_TURN, PoseRefiner, angle_deg, essential_pose
 
 
 @dataclass(frozen=True)
@@ -132,10 +132,9 @@ class BundleAdjuster:
         if len(ia) < c.min_inliers:
             return None
         pa, pb = self.refiner.features(a)[0][ia], self.refiner.features(b)[0][ib]
-        E, mask = cv2.findEssentialMat(pa, pb, a.K, cv2.RANSAC, 0.999, c.ransac_px)
-        if E is None or E.shape != (3, 3):
+        if (found := essential_pose(pa, pb, a.K, c.ransac_px)) is None:
             return None
-        inliers, R, t, mask = cv2.recoverPose(E, pa, pb, a.K, mask=mask)
+        inliers, R, t, mask = found
         keep = mask.ravel() > 0
         if inliers < max(c.min_inliers, c.min_inlier_ratio * len(ia)):
             return None

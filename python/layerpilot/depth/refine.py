@@ -145,10 +145,9 @@ class PoseRefiner:
         if len(pa) < c.min_inliers:
             return None, "too_few_matches", len(pa), 0
         px = c.ransac_px / c.scale
-        E, mask = cv2.findEssentialMat(pa, pb, ref.K, cv2.RANSAC, 0.999, px)
-        if E is None or E.shape != (3, 3):
+        if (found := essential_pose(pa, pb, ref.K, px)) is None:
             return None, "no_essential_matrix", len(pa), 0
-        inliers, R, t, mask = cv2.recoverPose(E, pa, pb, ref.K, mask=mask)
+        inliers, R, t, mask = found
         if inliers < max(c.min_inliers, c.min_inlier_ratio * len(pa)):
             return None, "too_few_inliers", len(pa), int(inliers)
         keep = mask.ravel() > 0
@@ -245,6 +244,21 @@ def _sampson(xa: np.ndarray, xb: np.ndarray, R: np.ndarray, t: np.ndarray) -> np
     E = skew(t) @ R
     Ex, Etx = np.einsum("kij,nj->kni", E, xa), np.einsum("kji,nj->kni", E, xb)
     return (xb[None] * Ex).sum(2) / np.sqrt(Ex[..., 0] ** 2 + Ex[..., 1] ** 2 + Etx[..., 0] ** 2 + Etx[..., 1] ** 2)
+
+
+def essential_pose(pa: np.ndarray, pb: np.ndarray, K: np.ndarray, px: float
+                   ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
+    """RANSAC essential matrix and the pose it holds (inliers, R, t, mask), or None when the matches
+    give none: OpenCV 5 raises on some degenerate samples (solvePoly's zero leading coefficient)
+    where 4.x returned no matrix, and either way the pair has no essential matrix."""
+    try:
+        E, mask = cv2.findEssentialMat(pa, pb, K, cv2.RANSAC, 0.999, px)
+        if E is None or E.shape != (3, 3):
+            return None
+        inliers, R, t, mask = cv2.recoverPose(E, pa, pb, K, mask=mask)
+    except cv2.error:
+        return None
+    return int(inliers), R, t, mask
 
 
 def skew(v: np.ndarray) -> np.ndarray:
