@@ -39,6 +39,8 @@ class WindowConfig:
     length_sigma: float = 0.02  # relative error of a transferred baseline length
     gnss_sigma_h: float = 2.0  # m, position prior per axis
     gnss_sigma_v: float = 4.0
+    delta_sigma_h: float = 0.2  # m per axis: the GNSS displacement between keyframes a second apart ...
+    delta_sigma_v: float = 0.3  # ... (the wandering error is common to both fixes; grows as sqrt(1 + dt))
     tilt_sigma_deg: float = 1.0  # attitude prior: roll and pitch ...
     yaw_sigma_deg: float = 10.0  # ... and heading: a bias does not average out over the window, GNSS's track sees it
     loss_scale: float = 3.0  # residuals beyond this many sigmas are down-weighted (soft L1)
@@ -46,7 +48,7 @@ class WindowConfig:
     def __post_init__(self) -> None:
         check_range("size", self.size, 2, 500)
         for name in ("rotation_sigma_deg", "direction_sigma_deg", "length_sigma", "gnss_sigma_h", "gnss_sigma_v",
-                     "tilt_sigma_deg", "yaw_sigma_deg", "loss_scale"):
+                     "delta_sigma_h", "delta_sigma_v", "tilt_sigma_deg", "yaw_sigma_deg", "loss_scale"):
             check_range(name, getattr(self, name), 1e-6)
 
 
@@ -166,12 +168,23 @@ class SlidingWindow:
         A_base[ar, :, other, 3:] = -w[:, :, None] * g
         A_base[ar, :, other, :3] = w[:, :, None] * np.einsum("kxa,kab->kxb", g, bx)
         r_base = w * r
+        # GNSS displacement: the pair's reported baseline, good to decimetres where the absolute fix is metres
+        # off (the receiver's wandering error is common to both fixes)
+        dt = np.array([abs(e.ref - e.other) for e in self.edges])
+        sig_delta = np.sqrt(1.0 + dt)[:, None] * [c.delta_sigma_h, c.delta_sigma_h, c.delta_sigma_v]
+        r_delta = (b - (prior_C[ref] - prior_C[other])) / sig_delta
+        w = _huber(np.abs(r_delta), c.loss_scale) / sig_delta
+        A_delta = np.zeros((m, 3, n, 6))
+        A_delta[ar, :, ref, 3:] = w[:, :, None] * np.eye(3)
+        A_delta[ar, :, other, 3:] = -w[:, :, None] * np.eye(3)
+        r_delta = w * sig_delta * r_delta
         # priors: attitude (map axes: tilt x, y and heading z) and GNSS position
         sig = np.concatenate([np.radians([c.tilt_sigma_deg, c.tilt_sigma_deg, c.yaw_sigma_deg]),
                               [c.gnss_sigma_h, c.gnss_sigma_h, c.gnss_sigma_v]])
         r_prior = np.hstack([_log_small(np.einsum("nij,nkj->nik", R, prior_R)), C - prior_C]) / sig
-        A = np.vstack([A_rot.reshape(3 * m, 6 * n), A_base.reshape(3 * m, 6 * n), np.diag(np.tile(1.0 / sig, n))])
-        res = np.concatenate([r_rot.ravel(), r_base.ravel(), r_prior.ravel()])
+        A = np.vstack([A_rot.reshape(3 * m, 6 * n), A_base.reshape(3 * m, 6 * n), A_delta.reshape(3 * m, 6 * n),
+                       np.diag(np.tile(1.0 / sig, n))])
+        res = np.concatenate([r_rot.ravel(), r_base.ravel(), r_delta.ravel(), r_prior.ravel()])
         A = csr_matrix(A)  # block-sparse; a sparse solve also stays off the BLAS thread pool, slow on a busy machine
         return spsolve((A.T @ A).tocsc(), -(A.T @ res)).reshape(n, 6)  # the priors keep A^T A well conditioned
 

@@ -36,6 +36,8 @@ class DepthServiceConfig:
     window: int = 20  # keyframes adjusted together
     gnss_sigma_h: float = 2.0  # m: how far the reported position may be off, per horizontal axis ...
     gnss_sigma_v: float = 4.0  # ... and vertically
+    gnss_delta_sigma_h: float = 0.2  # m: how far the reported displacement between frames a second apart may be off ...
+    gnss_delta_sigma_v: float = 0.3  # ... vertically (GNSS's wandering error is common to both frames)
     yaw_sigma_deg: float = 10.0  # deg: the reported heading's prior (weak: its bias shows in the GNSS track)
     max_clock_offset: float = 0.5  # s: the camera clock's offset from the telemetry's is searched within this
 
@@ -46,13 +48,16 @@ class DepthServiceConfig:
         check_range("depth.window", self.window, 2, 500)
         check_range("depth.gnss_sigma_h", self.gnss_sigma_h, 0.01, 1000.0)
         check_range("depth.gnss_sigma_v", self.gnss_sigma_v, 0.01, 1000.0)
+        check_range("depth.gnss_delta_sigma_h", self.gnss_delta_sigma_h, 0.001, 1000.0)
+        check_range("depth.gnss_delta_sigma_v", self.gnss_delta_sigma_v, 0.001, 1000.0)
         check_range("depth.yaw_sigma_deg", self.yaw_sigma_deg, 0.01, 180.0)
         check_range("depth.max_clock_offset", self.max_clock_offset, 0.0, 10.0)
 
     def live(self, gimbal: bool = True) -> LiveConfig:
         """The live refinement's settings."""
         window = dataclasses.replace(WindowConfig(), size=self.window, gnss_sigma_h=self.gnss_sigma_h,
-                                     gnss_sigma_v=self.gnss_sigma_v, yaw_sigma_deg=self.yaw_sigma_deg)
+                                     gnss_sigma_v=self.gnss_sigma_v, delta_sigma_h=self.gnss_delta_sigma_h,
+                                     delta_sigma_v=self.gnss_delta_sigma_v, yaw_sigma_deg=self.yaw_sigma_deg)
         return LiveConfig(window=window, max_offset=self.max_clock_offset, gimbal=gimbal)
 
 
