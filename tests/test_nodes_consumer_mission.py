@@ -58,6 +58,7 @@ height = 240
         last = health[-1]
         assert last["refined"] >= 5 and last["clouds"] >= 5, last
         assert "time_offset_pairs" in last, last  # the camera clock's offset is being estimated
+        assert last["height_registered"] >= 1, last  # clouds are fitted to the flight's earlier ones
         seqs = [d.seq for d in decisions]
         assert seqs == sorted(seqs) and len(set(seqs)) >= 4  # new decisions kept coming
         for s in subs:

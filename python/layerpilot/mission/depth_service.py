@@ -4,7 +4,8 @@ One place chooses the source and its settings, so the live depth node and the lo
 evaluator make the same clouds: two-view stereo with the measured preset for the image
 width and focal length (chosen on the first frame), or the frame's own depth (simulator, RGB-D).
 Stereo refines the poses of its pairs from the images first (``refine``, on by default;
-``depth.live``): a real drone's reported poses are too coarse for two-view stereo. The vehicle's
+``depth.live``): a real drone's reported poses are too coarse for two-view stereo; each cloud's height
+is then fitted to the flight's earlier clouds (``register_height``, ``depth.height_registration``). The vehicle's
 telemetry pose stream (``push_pose``) lets it learn the camera clock's offset and read the
 priors at the exposure time.
 """
@@ -18,6 +19,7 @@ from typing import Literal
 from layerpilot.config import check_range
 from layerpilot.depth.config import DepthConfig, preset_for
 from layerpilot.depth.downscale import processing_intrinsics
+from layerpilot.depth.height_registration import HeightRegistration
 from layerpilot.depth.live import LiveConfig, LiveRefiner
 from layerpilot.depth.window import WindowConfig
 from layerpilot.geometry import CameraFrame, PointCloud, Pose
@@ -33,6 +35,7 @@ class DepthServiceConfig:
     stride: int = 2  # ground truth: every stride-th pixel in each direction
     queue_size: int = 4  # frames waiting in the live node; the oldest is dropped beyond
     refine: bool = True  # stereo: refine the pairs' poses from the images (false: use the reported poses as they are)
+    register_height: bool = True  # stereo: fit each cloud's height to the flight's earlier clouds (GNSS's vertical wander)
     window: int = 20  # keyframes adjusted together
     gnss_sigma_h: float = 2.0  # m: how far the reported position may be off, per horizontal axis ...
     gnss_sigma_v: float = 4.0  # ... and vertically
@@ -72,6 +75,7 @@ class DepthService:
         self.source: DepthSource | None = (GroundTruthDepth(cfg.max_depth, cfg.stride)
                                            if cfg.source == "ground_truth" else None)
         self.refiner = LiveRefiner(cfg.live(gimbal)) if cfg.source == "stereo" and cfg.refine else None
+        self.height = HeightRegistration() if cfg.source == "stereo" and cfg.register_height else None
         self.frames = 0
         self.clouds = 0
         self._reported: list[tuple[float, Pose]] = []  # without refinement: the poses the clouds were placed with
@@ -92,14 +96,18 @@ class DepthService:
         cloud = self.source.push(frame)
         if cloud is None or len(cloud) == 0:
             return None
+        if self.height is not None:
+            cloud = self.height.register(cloud)
         self.clouds += 1
         return cloud
 
     def trajectory(self) -> list[tuple[float, Pose]]:
         """The camera poses the clouds were placed with, [(stamp, camera -> map)]: the refined keyframes'
-        latest estimates, or without refinement every frame's reported pose."""
-        return self.refiner.trajectory() if self.refiner is not None else list(self._reported)
+        latest estimates, or without refinement every frame's reported pose; lifted by the height registration."""
+        placed = self.refiner.trajectory() if self.refiner is not None else list(self._reported)
+        return self.height.corrected(placed) if self.height is not None else placed
 
     def stats(self) -> dict[str, float]:
         source = self.source.stats() if self.source is not None else {}
-        return {"frames": self.frames, "clouds": self.clouds, **source}
+        height = self.height.stats() if self.height is not None else {}
+        return {"frames": self.frames, "clouds": self.clouds, **source, **height}
