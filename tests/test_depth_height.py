@@ -62,11 +62,14 @@ def test_a_jump_or_a_cloud_over_unmapped_ground_keeps_the_last_correction_and_is
 
 
 def test_the_local_map_forgets_what_lies_beyond_its_radius(clouds):
-    registration = HeightRegistration(dataclasses.replace(HeightRegistrationConfig(), radius=30.0))
+    config = dataclasses.replace(HeightRegistrationConfig(), radius=30.0, tile=8.0)
+    registration = HeightRegistration(config)
     for c in clouds:
         registration.register(c)
-    kept = registration._map
-    assert len(kept) and np.hypot(*(kept[:, :2] - clouds[-1].origin[:2]).T).max() <= 30.0
+    kept = registration._near(np.full(3, -1e4), np.full(3, 1e4))  # every tile
+    assert 0 < len(kept) == registration.stats()["height_map_points"]
+    # whole tiles leave: none whose centre is beyond radius + one tile
+    assert np.hypot(*(kept[:, :2] - clouds[-1].origin[:2]).T).max() <= 30.0 + 8.0 * (1 + 0.5 * 2 ** 0.5)
 
 
 def test_settings_are_validated():

@@ -16,6 +16,7 @@ map horizontally more than it fixed: docs/depth.md).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -34,14 +35,15 @@ class HeightRegistrationConfig:
 
     map_voxel: float = 1.0  # m: the local map keeps one point per voxel of this size
     sample_voxel: float = 1.5  # m: a cloud is compared with one point per voxel of this size
-    radius: float = 200.0  # m: map points farther than this in plan from the newest cloud's origin leave
+    radius: float = 200.0  # m: map tiles farther than this in plan from the newest cloud's origin leave
+    tile: float = 32.0  # m: the local map is kept in square tiles of this side (what a cloud is compared with)
     max_plan_distance: float = 1.0  # m: a sampled point's map neighbour must be this close in plan
     max_residual: float = 4.0  # m: height differences beyond this are not the same surface
     min_matches: int = 200
     max_step: float = 1.0  # m: a larger step from the last correction is distrusted
 
     def __post_init__(self) -> None:
-        for name in ("map_voxel", "sample_voxel", "radius", "max_plan_distance", "max_residual", "max_step"):
+        for name in ("map_voxel", "sample_voxel", "radius", "tile", "max_plan_distance", "max_residual", "max_step"):
             check_range(f"height_registration.{name}", getattr(self, name), 1e-3)
         check_range("height_registration.min_matches", self.min_matches, 1)
 
@@ -58,7 +60,7 @@ class HeightRegistration:
     def __init__(self, config: HeightRegistrationConfig = HeightRegistrationConfig()) -> None:
         self.config = config
         self.correction = 0.0  # m, added to every height of the newest cloud
-        self._map = np.zeros((0, 3))
+        self._tiles: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}  # tile -> (points, voxel keys)
         self._keys: set[int] = set()
         self._stamps: list[float] = []
         self._corrections: list[float] = []
@@ -87,12 +89,18 @@ class HeightRegistration:
         points[:, 2] += self.correction
         return PointCloud(points.astype(np.float32), origin, cloud.stamp, cloud.colors)
 
+    def _near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The local map's points in the tiles that the box lo..hi (plan) touches."""
+        t0, t1 = np.floor(lo[:2] / self.config.tile).astype(int), np.floor(hi[:2] / self.config.tile).astype(int)
+        parts = [self._tiles[(i, j)][0] for i in range(t0[0], t1[0] + 1) for j in range(t0[1], t1[1] + 1)
+                 if (i, j) in self._tiles]
+        return np.vstack(parts) if parts else np.zeros((0, 3))
+
     def _step(self, sample: np.ndarray) -> tuple[float | None, str]:
         c = self.config
-        if len(self._map) == 0:
+        if not self._tiles:
             return None, "first_cloud"
-        lo, hi = sample.min(0) - c.max_residual, sample.max(0) + c.max_residual
-        near = self._map[np.all((self._map >= lo) & (self._map <= hi), axis=1)]
+        near = self._near(sample.min(0) - c.max_plan_distance, sample.max(0) + c.max_plan_distance)
         if len(near) < c.min_matches:
             return None, "too_few_matches"
         d, idx = cKDTree(near[:, :2]).query(sample[:, :2], distance_upper_bound=c.max_plan_distance)
@@ -107,16 +115,24 @@ class HeightRegistration:
         return step, "ok"
 
     def _add(self, points: np.ndarray, origin: np.ndarray) -> None:
-        """New voxels' points into the local map; points beyond ``radius`` in plan leave it."""
+        """New voxels' points into their tiles; tiles beyond ``radius`` in plan leave the map."""
         c = self.config
         keys = _voxel_keys(points, c.map_voxel)
         new = np.fromiter((k not in self._keys for k in keys.tolist()), bool, len(keys))
-        self._keys.update(keys[new].tolist())
-        self._map = np.vstack([self._map, points[new]])
-        far = np.hypot(*(self._map[:, :2] - origin[:2]).T) > c.radius
-        if far.any():
-            self._map = self._map[~far]
-            self._keys = set(_voxel_keys(self._map, c.map_voxel).tolist())
+        points, keys = points[new], keys[new]
+        self._keys.update(keys.tolist())
+        tiles = np.floor(points[:, :2] / c.tile).astype(int)
+        for t in {tuple(t) for t in tiles.tolist()}:
+            mine = np.all(tiles == t, axis=1)
+            old_points, old_keys = self._tiles.get(t, (np.zeros((0, 3)), np.zeros(0, np.int64)))
+            self._tiles[t] = (np.vstack([old_points, points[mine]]), np.concatenate([old_keys, keys[mine]]))
+        for t in [t for t in self._tiles if math.hypot((t[0] + 0.5) * c.tile - origin[0],
+                                                       (t[1] + 0.5) * c.tile - origin[1]) > c.radius + c.tile]:
+            self._keys.difference_update(self._tiles.pop(t)[1].tolist())
+
+    @property
+    def map_points(self) -> int:
+        return sum(len(p) for p, _ in self._tiles.values())
 
     def corrected(self, trajectory: list[tuple[float, Pose]]) -> list[tuple[float, Pose]]:
         """Camera poses lifted by the correction of the cloud nearest in time: where the clouds show them."""
@@ -132,4 +148,4 @@ class HeightRegistration:
     def stats(self) -> dict[str, float]:
         return {"height_registered": self.registered,
                 **{f"height_skipped_{k}": self.skipped[k] for k in SKIPS},
-                "height_correction_m": round(self.correction, 3), "height_map_points": len(self._map)}
+                "height_correction_m": round(self.correction, 3), "height_map_points": self.map_points}
