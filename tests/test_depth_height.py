@@ -45,6 +45,8 @@ def test_a_wandering_height_is_taken_out_cloud_by_cloud(clouds):
     # the trajectory the clouds show is lifted by the same correction
     poses = registration.corrected([(c.stamp, Pose(c.origin)) for c in out])
     assert poses[-1][1].position[2] - out[-1].origin[2] == pytest.approx(registration.correction)
+    lift = [p.position[2] for _, p in registration.corrected([(out[3].stamp + dt, Pose()) for dt in (0.0, 0.4, 0.6)])]
+    assert lift[0] == lift[1] != lift[2]  # the nearest cloud's correction (clouds are 1 s apart)
 
 
 def test_a_jump_or_a_cloud_over_unmapped_ground_keeps_the_last_correction_and_is_counted(clouds):

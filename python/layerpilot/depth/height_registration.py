@@ -136,14 +136,15 @@ class HeightRegistration:
 
     def corrected(self, trajectory: list[tuple[float, Pose]]) -> list[tuple[float, Pose]]:
         """Camera poses lifted by the correction of the cloud nearest in time: where the clouds show them."""
-        if not self._stamps:
+        if not self._stamps or not trajectory:
             return trajectory
-        stamps = np.asarray(self._stamps)
-        out = []
-        for stamp, pose in trajectory:
-            dz = self._corrections[int(np.argmin(np.abs(stamps - stamp)))]
-            out.append((stamp, Pose(pose.position + (0.0, 0.0, dz), pose.orientation)))
-        return out
+        stamps = np.asarray(self._stamps)  # in order: clouds come in time order
+        t = np.array([stamp for stamp, _ in trajectory])
+        after = np.clip(np.searchsorted(stamps, t), 0, len(stamps) - 1)
+        before = np.maximum(after - 1, 0)
+        nearest = np.where(np.abs(stamps[before] - t) <= np.abs(stamps[after] - t), before, after)
+        return [(stamp, Pose(pose.position + (0.0, 0.0, self._corrections[i]), pose.orientation))
+                for (stamp, pose), i in zip(trajectory, nearest.tolist())]
 
     def stats(self) -> dict[str, float]:
         return {"height_registered": self.registered,
