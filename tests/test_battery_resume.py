@@ -222,6 +222,19 @@ def test_up_resume_starts_the_sim_and_link_nodes_on_the_saved_mission_clock(tmp_
             survey.clock_after(tmp_path / "state", ["uav1", "uav2"])
 
 
+def test_up_sets_a_saved_survey_aside_before_any_node_starts(tmp_path, capsys):
+    """`up` without --resume moves the saved survey to uav1.json.bak itself, so its warning is true even for a
+    run that ends before the decide node starts."""
+    m = tmp_path / "m.toml"
+    m.write_text(f'[decide]\nstate = "{tmp_path / "state"}"\n')
+    path = survey.state_file(tmp_path / "state", "uav1")
+    survey.save(build_pilot(load_mission(str(m)).core), path, 38.5, 33.5, "run1")
+    saved = path.read_text()
+    assert cli_main(["up", "--mission", str(m), "--duration", "0.2", "--log-dir", str(tmp_path / "logs")]) == 0
+    assert (tmp_path / "state" / "uav1.json.bak").read_text() == saved
+    assert "the surveys saved in decide.state for uav1 are kept as <vehicle>.json.bak" in capsys.readouterr().out
+
+
 def test_a_new_survey_keeps_another_runs_saved_state_as_bak(tmp_path, caplog):
     """A decide node of a new run (no --resume) does not overwrite the survey another run saved: it keeps it as
     uav1.json.bak and says so once; a node restarted within the same run continues its predecessor's state."""

@@ -62,6 +62,15 @@ def test_a_bad_clock_start_is_refused_naming_the_flag(tmp_path, capsys):
     assert "--clock-start: mission clock start: expected finite seconds >= 0, got -5.0" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("value", ["0", "-5", "nan", "inf"])
+def test_up_refuses_a_duration_that_is_not_a_positive_number_of_seconds(value, tmp_path, capsys):
+    """Before anything starts: `up --duration 0` would start every node and stop them at once."""
+    with pytest.raises(SystemExit) as stopped:
+        cli_main(["up", "--mission", mission(tmp_path), "--duration", value, "--log-dir", str(tmp_path / "logs")])
+    assert stopped.value.code == 2 and f"argument --duration: must be finite seconds > 0, got {value}" in capsys.readouterr().err
+    assert not (tmp_path / "logs").exists()
+
+
 def test_sim_node_rejects_a_bad_rate_naming_the_flag(tmp_path):
     done = run("sim", "--config", mission(tmp_path), "--endpoint", free_endpoint(), "--mavlink", "tcp:127.0.0.1:0",
                "--rate", "0")

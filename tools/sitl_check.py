@@ -9,8 +9,8 @@ what it saw and exits 1 on any mismatch::
     .venv/bin/python tools/sitl_check.py /work/sitl/ardupilot/build/sitl/bin/arducopter
     .venv/bin/python tools/sitl_check.py BIN --only ready,cli,script     # some steps
 
-Build the binary with ../shared/tools/build_sitl.sh (docs/link.md, "Flying a real ArduPilot
-or PX4 SITL"). Steps: ``ready`` (cold start until FlightLink.wait_ready), ``cli`` (`layerpilot
+Build the binary as ArduPilot documents it (``./waf configure --board sitl && ./waf copter``;
+docs/link.md, "Flying a real ArduPilot or PX4 SITL"). Steps: ``ready`` (cold start until FlightLink.wait_ready), ``cli`` (`layerpilot
 link` takeoff/goto/land/rtl, rtl and land on a disarmed vehicle, each warning once),
 ``script`` (the plain pymavlink ArduCopter script of tests/test_sim_vehicle_ardupilot_script.py
 against this SITL and against layerpilot's simulated vehicle, fields side by side),
@@ -42,7 +42,7 @@ from pymavlink import mavutil
 from layerpilot.link.link import LinkError
 
 REPO = Path(__file__).resolve().parent.parent
-HOME = "-35.363261,149.165230,584,353"  # ArduPilot's CMAC test field, as in build_sitl.sh
+HOME = "-35.363261,149.165230,584,353"  # ArduPilot's CMAC test field (its locations.txt)
 GCS_URL = "tcp:127.0.0.1:5762"  # the SITL's second MAVLink port: this script's eyes
 LINK_URL = "tcp:127.0.0.1:5760"  # where layerpilot connects
 STEPS = ("ready", "cli", "script", "up", "ctrlc", "reboot", "battery")

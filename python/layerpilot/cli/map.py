@@ -14,12 +14,16 @@ def register(commands: argparse._SubParsersAction) -> None:
     info.set_defaults(func=_info)
     scan = sub.add_parser("scan", help="build a map from a plain-text x y z scan and write .ot, .bt and layer pictures")
     scan.add_argument("scan", type=Path, help="text or .bz2 file, one 'x y z' point per line, sensor at the origin")
-    scan.add_argument("--out", type=Path, default=Path("runs/scan"))
-    scan.add_argument("--resolution", type=float, default=0.2)
+    scan.add_argument("--out", type=Path, default=Path("runs/scan"),
+                      help="run directory: map.ot, map.bt and the layer pictures (default runs/scan)")
+    scan.add_argument("--resolution", type=float, default=0.2, help="voxel size in metres")
     scan.set_defaults(func=_scan)
     images = sub.add_parser("images", help="build the map and layers from a folder of geotagged drone photos")
-    images.add_argument("folder", type=Path, help="folder of JPEGs with EXIF GPS and DJI/Parrot XMP attitude")
-    images.add_argument("--out", type=Path, default=Path("runs/photos"))
+    images.add_argument("folder", type=Path, help="folder of JPEGs with EXIF GPS and DJI/Parrot XMP attitude, "
+                                                  "or a project folder with them in images/")
+    images.add_argument("--out", type=Path, default=Path("runs/photos"),
+                        help="run directory: map.ot, map.bt, frame.json, cameras.csv, pairs.csv, layer pictures and "
+                             "the report (default runs/photos)")
     images.add_argument("--calibration", type=Path, help="OpenCV YAML calibration overriding EXIF intrinsics")
     images.add_argument("--origin", type=float, nargs=3, metavar=("LAT", "LON", "ALT"),
                         help="map frame origin (default: below the first photo at its take-off height)")

@@ -22,6 +22,17 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 
+def _seconds(text: str) -> float:
+    """A positive, finite number of seconds (``up --duration 0`` would start every node and stop them at once)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be finite seconds > 0, got {text}")
+    return value
+
+
 def register(commands: argparse._SubParsersAction) -> None:
     p = add_node_command(commands, "map-server", _map_server,
                          "the map daemon: clouds in, layer sets and map queries out (one for all vehicles)",
@@ -59,7 +70,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue the survey where it stopped (after a battery swap): the decide nodes load "
                         "decide.state, the map server its newest snapshot")
-    p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--duration", type=_seconds, help="stop after this many seconds (default: until Ctrl-C)")
     p.add_argument("--log-dir", default="runs/logs", help="each node's log (stderr) goes to <log-dir>/<node>.log")
     p.add_argument("--secrets", help="bus.security on: each node's and the operator's credentials go here "
                                      "(mode 0700; default <log-dir>/../bus-secrets)")

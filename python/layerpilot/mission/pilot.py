@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from layerpilot.config import check_range
+from layerpilot.config import ConfigError, check_range
 from layerpilot.decide.behavior import Behavior, load_behavior
 from layerpilot.decide.decision import Decision
 from layerpilot.decide.area import zone_mask
@@ -59,7 +59,12 @@ class PilotConfig:
 
 def load_pilot_behavior(name: str) -> Behavior:
     """The behavior a pilot flies; a pattern flies the balanced preset's area and altitude."""
-    return load_behavior("balanced" if name in PATTERNS else name)
+    try:
+        return load_behavior("balanced" if name in PATTERNS else name)
+    except ConfigError as exc:
+        if "not a preset" not in str(exc):
+            raise
+        raise ConfigError(f"{str(exc).removesuffix(')')}; patterns: {', '.join(PATTERNS)})") from None
 
 
 @dataclass(frozen=True)

@@ -197,7 +197,7 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     vehicle has none)."""
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
-    from layerpilot.mission.resume import clock_after, state_file
+    from layerpilot.mission.resume import clock_after, set_aside, state_file
     from layerpilot.nodes.runner import bus_config
 
     path = resolve(mission)
@@ -209,9 +209,10 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
             raise ValueError(f"--resume: no saved survey state for {', '.join(missing)} in decide.state "
                              f"({m.decide.state!r})")
         clock = clock_after(m.decide.state, m.vehicles).start  # read once: restarted nodes keep this start
-    # a new survey: the decide nodes keep a saved one aside (<vehicle>.json.bak) rather than overwrite it
+    # a new survey keeps a saved one aside (<vehicle>.json.bak) rather than overwrite it; done here, before
+    # any node starts, so the warning below is true however soon the run ends
     saved = [] if resume or not m.decide.state else \
-        [v for v in m.vehicles if state_file(m.decide.state, v).exists()]
+        [v for v in m.vehicles if set_aside(state_file(m.decide.state, v)) is not None]
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
