@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "python" / "layerpilot"
 
 # Top to bottom; a package may import only the rows below its own.
-ROWS = [{"cli"}, {"bench"}, {"eval"}, {"viz"}, {"nodes"}, {"missionfile"}, {"bus", "sim"}, {"mission"}, {"photos"},
+ROWS = [{"cli"}, {"bench"}, {"eval"}, {"viz"}, {"nodes"}, {"missionfile"}, {"ros2"}, {"bus", "sim"}, {"mission"}, {"photos"},
         {"decide", "depth"}, {"layers", "link"}, {"map"}, {"camera"},
         {"grid", "config", "progress", "geometry", "geodesy"}]
 

@@ -27,6 +27,7 @@ from layerpilot.mission.core import MissionCore
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
 from layerpilot.mission.pilot import PilotConfig, load_pilot_behavior
+from layerpilot.ros2.topics import Ros2Config
 from layerpilot.sim.simulator import SimConfig
 
 MISSION_DIR = shipped_config("missions")
@@ -92,6 +93,7 @@ class Mission:
     sim: SimConfig = field(default_factory=SimConfig)
     camera: CameraSettings = field(default_factory=CameraSettings)
     evaluation: EvaluationSettings = field(default_factory=EvaluationSettings)
+    ros2: Ros2Config = field(default_factory=Ros2Config)
 
     def __post_init__(self) -> None:
         check_range("speed", self.speed, 0.01, 100.0)

@@ -6,6 +6,10 @@ bus key (``layerpilot/uav1/cloud``), protobuf encoding, the schema of proto/mess
 travelled. The mission file is kept as MCAP metadata (``layerpilot`` / ``mission``), so a
 replay flies the same map settings and behavior area.
 
+With a ``translate`` function (``layerpilot.ros2.recording.ros2_channels``) the recording also
+holds ROS 2 channels (``ros2msg`` schemas, CDR messages: what ``ros2 bag`` and Foxglove read as a
+ROS 2 bag), beside the protobuf ones or, with ``protobuf=False``, instead of them.
+
 Writing happens on one thread behind a queue (a Zenoh callback never waits on compression);
 chunks carry CRCs. When the file cannot be written (a full disk, a lost mount) the writer logs it
 once, drops and counts what is queued and every later message, and ``error`` says what happened:
@@ -22,7 +26,7 @@ import time
 from collections import Counter, deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import zenoh
 from mcap.records import Channel, Message, Metadata, Schema
@@ -46,6 +50,21 @@ CHUNK_SIZE = 256 << 10  # bytes: a crash loses at most the last chunk
 MAX_QUEUED_BYTES = 512 << 20  # payload bytes waiting for the writer; beyond, new messages are dropped and counted
 
 
+@dataclass(frozen=True)
+class ExtraMessage:
+    """A message of another encoding written for a bus message (a ROS 2 one: ``ros2msg`` schema, CDR data)."""
+
+    topic: str
+    schema_name: str
+    schema_encoding: str
+    schema: str  # the schema's text
+    message_encoding: str
+    data: bytes
+
+
+Translate = Callable[[str, bytes], list[ExtraMessage]]  # (bus topic, payload) -> messages to write beside it
+
+
 def topic_of(key: str) -> str:
     """The topic of a concrete key ``layerpilot/<vehicle>/<topic>`` or ``layerpilot/<vehicle>/health/<node>``
     (BadMessage when it is none of ours)."""
@@ -61,8 +80,10 @@ def topic_of(key: str) -> str:
 class RecordingWriter:
     """An MCAP file being written: ``write(key, payload)`` from any thread, ``close()`` once."""
 
-    def __init__(self, path: str | Path, mission_text: str = "") -> None:
+    def __init__(self, path: str | Path, mission_text: str = "", translate: Translate | None = None,
+                 protobuf: bool = True) -> None:
         self.path = Path(path)
+        self._translate, self._protobuf = translate, protobuf
         if self.path.parent.exists() and not self.path.parent.is_dir():
             raise NotADirectoryError(f"cannot write the recording {self.path}: {self.path.parent} is not a folder")
         try:
@@ -131,6 +152,16 @@ class RecordingWriter:
 
     def _add(self, key: str, payload: bytes, stamp: int) -> None:
         topic = topic_of(key)
+        if self._translate is not None:
+            try:
+                extra = self._translate(topic, payload)
+            except BadMessage as exc:
+                self.rejects.reject(key, exc)
+                extra = []
+            for m in extra:
+                self._add_extra(m, stamp)
+        if not self._protobuf:
+            return
         if key not in self._channels:
             cls = SCHEMAS[topic]
             if topic not in self._schemas:
@@ -140,6 +171,18 @@ class RecordingWriter:
                                sequence=self._sequence[key])
         self._sequence[key] += 1
         self.written[key] += 1
+
+    def _add_extra(self, m: ExtraMessage, stamp: int) -> None:
+        if m.topic not in self._channels:
+            if m.schema_name not in self._schemas:
+                self._schemas[m.schema_name] = self._mcap.register_schema(m.schema_name, m.schema_encoding,
+                                                                          m.schema.encode())
+            self._channels[m.topic] = self._mcap.register_channel(m.topic, m.message_encoding,
+                                                                  self._schemas[m.schema_name])
+        self._mcap.add_message(self._channels[m.topic], log_time=stamp, data=m.data, publish_time=stamp,
+                               sequence=self._sequence[m.topic])
+        self._sequence[m.topic] += 1
+        self.written[m.topic] += 1
 
     def close(self) -> None:
         """Write what is queued, then the index and footer (the file is complete only after this);
@@ -170,8 +213,9 @@ class RecordingWriter:
 class Recorder:
     """Every message of a mission's bus (``layerpilot/**``) into a recording, until ``stop()``."""
 
-    def __init__(self, session: zenoh.Session, path: str | Path, mission_text: str = "") -> None:
-        self.writer = RecordingWriter(path, mission_text)
+    def __init__(self, session: zenoh.Session, path: str | Path, mission_text: str = "",
+                 translate: Translate | None = None, protobuf: bool = True) -> None:
+        self.writer = RecordingWriter(path, mission_text, translate, protobuf)
         self._sub = session.declare_subscriber(f"{keys.PREFIX}/**", self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -197,7 +241,8 @@ class RecordedMessage:
 class RecordingReader:
     """Sequential reading of a recording: ``messages()`` yields ours in file order; after it,
     ``damage`` says where reading stopped early (empty: read to the end), ``unknown_schemas`` counts
-    the skipped messages per schema name, ``mission_text`` is the recorded mission file (or "")."""
+    the skipped messages per schema name (``ros2_messages`` those of ROS 2 channels), ``mission_text`` is
+    the recorded mission file (or "")."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -206,6 +251,7 @@ class RecordingReader:
         self.damage = ""
         self.unknown_schemas: Counter[str] = Counter()
         self.counts: Counter[str] = Counter()  # messages yielded per key
+        self.ros2_messages = 0  # ROS 2 channels' messages, skipped (ros2.recording writes them for ROS tools)
         self.mission_text = ""
         self.size = self.path.stat().st_size
         self.position = 0  # bytes read so far (progress)
@@ -245,6 +291,9 @@ class RecordingReader:
             topic = topic_of(channel.topic) if channel is not None else ""
         except BadMessage:
             topic = ""
+        if schema is not None and schema.encoding == "ros2msg":  # a ROS 2 channel beside ours: not replayed
+            self.ros2_messages += 1
+            return None
         if (schema is None or schema.encoding != "protobuf" or name not in KNOWN_SCHEMAS or not topic
                 or SCHEMAS[topic].DESCRIPTOR.full_name != name):
             self.unknown_schemas[name] += 1

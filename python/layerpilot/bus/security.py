@@ -54,6 +54,8 @@ class Grant:
     subscribe: tuple[str, ...] = ()  # key expressions it may subscribe to (and be delivered puts on)
     query: tuple[str, ...] = ()  # key expressions it may query (and be delivered replies on)
     answer: tuple[str, ...] = ()  # key expressions it may serve (declare a queryable, get queries, reply)
+    announce: tuple[str, ...] = ()  # liveliness tokens it may declare (rmw_zenoh's ROS 2 graph)
+    watch: tuple[str, ...] = ()  # liveliness tokens it may see (subscribe to and query)
 
 
 def node_user(role: str, vehicle: str | None = None) -> str:
@@ -61,10 +63,13 @@ def node_user(role: str, vehicle: str | None = None) -> str:
     return role if vehicle is None else f"{role}-{keys.check_vehicle(vehicle)}"
 
 
-def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = False) -> dict[str, Grant]:
+def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = False,
+           ros2: tuple[int, str] | None = None) -> dict[str, Grant]:
     """Every user of a mission and what it may do (the one place that says who talks to whom).
 
-    ``photos``: the camera plays a photo folder and publishes its photos' poses (there is no link node)."""
+    ``photos``: the camera plays a photo folder and publishes its photos' poses (there is no link node).
+    ``ros2``: (domain id, namespace) of the ROS 2 bridges: each may put under ``<domain>/<namespace>/`` and
+    announce itself in rmw_zenoh's graph; the operator (a ROS 2 tool logging in as it) may read them."""
     services = tuple(f"{keys.PREFIX}/*/map/{name}" for name in keys.SERVICES)
     out = {MAP_SERVER: Grant(publish=tuple(key for v in vehicles for key in (keys.Keys(v).layers,
                                                                              keys.Keys(v).health(MAP_SERVER))),
@@ -81,10 +86,16 @@ def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = 
         out[node_user("decide", v)] = Grant(publish=(k.waypoint, k.decision, k.state, k.health("decide")),
                                             subscribe=(k.layers, k.pose, keys.all_vehicles("decision")),
                                             query=(k.service("layers"),), answer=(k.aggregates,))
+    ros_topics, graph = ((f"{ros2[0]}/{ros2[1].strip('/')}/**",), (f"@ros2_lv/{ros2[0]}/**",)) if ros2 else ((), ())
+    if ros2:
+        for v in vehicles:
+            k = keys.Keys(v)
+            out[node_user("ros2", v)] = Grant(publish=ros_topics + (k.health("ros2"),), announce=graph,
+                                              subscribe=(k.pose, k.decision, k.cloud, k.layers))
     allowed = OPERATOR_QUERIES + (("save",) if operator_can_save else ())
-    out[OPERATOR] = Grant(subscribe=(f"{keys.PREFIX}/**",),  # every topic and every node's health
+    out[OPERATOR] = Grant(subscribe=(f"{keys.PREFIX}/**",) + ros_topics,  # every topic and every node's health
                           query=tuple(f"{keys.PREFIX}/*/map/{name}" for name in allowed)
-                          + (f"{keys.PREFIX}/*/decide/aggregates",))
+                          + (f"{keys.PREFIX}/*/decide/aggregates",), announce=graph, watch=graph)
     return out
 
 
@@ -104,7 +115,10 @@ def access_control(table: dict[str, Grant]) -> dict:
                 ("query", ["query"], "ingress", g.query),
                 ("replies", ["reply"], "egress", g.query),
                 ("answer", ["declare_queryable", "reply"], "ingress", g.answer),
-                ("queries", ["query"], "egress", g.answer)):
+                ("queries", ["query"], "egress", g.answer),
+                ("announce", ["liveliness_token"], "ingress", g.announce),
+                ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", g.watch),
+                ("graph", ["liveliness_token", "reply"], "egress", g.watch)):
             if key_exprs:
                 ids.append(f"{user}/{what}")
                 rules.append({"id": ids[-1], "permission": "allow", "flows": [flow], "messages": messages,
@@ -238,10 +252,11 @@ def hub_config(cfg: BusConfig, secrets: MissionSecrets, acl: dict) -> zenoh.Conf
 
 
 def open_hub(cfg: BusConfig, secrets_dir: str | Path, vehicles: list[str],
-             operator_can_save: bool | None = None, photos: bool = False) -> tuple[zenoh.Session, MissionSecrets]:
+             operator_can_save: bool | None = None, photos: bool = False,
+             ros2: tuple[int, str] | None = None) -> tuple[zenoh.Session, MissionSecrets]:
     """Prepare the mission's secrets and open its hub session (the endpoints as ``check_security`` allows)."""
     cfg.check_security()
-    table = grants(vehicles, cfg.operator_can_save if operator_can_save is None else operator_can_save, photos)
+    table = grants(vehicles, cfg.operator_can_save if operator_can_save is None else operator_can_save, photos, ros2)
     s = prepare_secrets(secrets_dir, table)
     try:
         return zenoh.open(hub_config(cfg, s, access_control(table))), s

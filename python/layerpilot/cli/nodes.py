@@ -56,6 +56,13 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--file-start", type=float, help="mission time (s) of a video file's first frame or a photo "
                                                     "folder's first photo (default: camera.file_start)")
 
+    p = add_node_command(commands, "ros2", _ros2,
+                         "the ROS 2 bridge: the vehicle's pose, path, target, clouds and layers as ROS 2 topics over "
+                         "rmw_zenoh (no ROS install needed; docs/ros2.md)",
+                         flags={"domain_id": "ros2.domain_id", "namespace": "ros2.namespace"})
+    p.add_argument("--domain-id", type=int, help="ROS_DOMAIN_ID of the topics (default: ros2.domain_id, 0)")
+    p.add_argument("--namespace", help="topics are <namespace>/<vehicle>/... (default: ros2.namespace, /layerpilot)")
+
     p = commands.add_parser("router", help="a Zenoh router for several machines (nodes then use mode = client)")
     p.add_argument("--config", help="mission file or name (for its [bus] table)")
     p.add_argument("--endpoint", help="listen endpoint (default tcp/127.0.0.1:7447)")
@@ -75,6 +82,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--secrets", help="bus.security on: each node's and the operator's credentials go here "
                                      "(mode 0700; default <log-dir>/../bus-secrets)")
     p.add_argument("--record", help="write every bus message to this MCAP file (`layerpilot replay` reads it)")
+    add_ros2_record_flag(p)
     p.add_argument("--operator-can-save", action="store_true",
                    help="the operator's credentials may also query map/save (bus.operator_can_save)")
     p.set_defaults(func=_up)
@@ -94,6 +102,13 @@ def add_node_command(commands: argparse._SubParsersAction, role: str, build: Bui
                                          "secrets directory); without it the node joins as an open peer")
     p.set_defaults(func=_run_node, role=role, build=build, mission_flags=flags or {})
     return p
+
+
+def add_ros2_record_flag(p: argparse.ArgumentParser) -> None:
+    """`--ros2`: the ROS 2 channels of a recording (`up --record`, `record`)."""
+    p.add_argument("--ros2", choices=("off", "beside", "only"), default="off",
+                   help="ROS 2 channels (CDR, ros2msg schemas) that ros2 bag and Foxglove read as a ROS 2 bag: "
+                        "beside the protobuf ones, or only them (`replay` then has nothing to read); default off")
 
 
 def add_clock_flag(p: argparse.ArgumentParser) -> None:
@@ -265,6 +280,15 @@ def _camera(args, mission, vehicle, session) -> Running:
                    run=node.run, supervisor=node.supervisor)
 
 
+def _ros2(args, mission, vehicle, session) -> Running:
+    from layerpilot.nodes.ros2 import Ros2Bridge
+
+    node = Ros2Bridge(session, vehicle, mission.ros2)
+    node.start()
+    return Running(node.status, node.stop, {"domain_id": mission.ros2.domain_id, "namespace": mission.ros2.namespace},
+                   supervisor=node.supervisor)
+
+
 def _router(args: argparse.Namespace) -> int:
     from layerpilot.bus.security import open_hub
     from layerpilot.bus.session import open_session
@@ -275,7 +299,9 @@ def _router(args: argparse.Namespace) -> int:
     mission = load_mission(args.config)
     bus = bus_config(mission.bus, args.endpoint, mode="router")
     if bus.security:  # the mission's hub: its users' logins and allow-list, as `up` makes them
-        session, secrets = open_hub(bus, args.secrets, mission.vehicles)
+        session, secrets = open_hub(bus, args.secrets, mission.vehicles,
+                                    ros2=(mission.ros2.domain_id, mission.ros2.namespace) if mission.ros2.enabled
+                                    else None)
     else:
         session, secrets = open_session(bus), None
     _say(node="router", status="ready", zid=str(session.zid()),
@@ -290,5 +316,5 @@ def _up(args: argparse.Namespace) -> int:
 
     return up(args.mission, endpoint=args.endpoint, status_every=args.status_every, duration=args.duration,
               log_dir=args.log_dir, secrets_dir=args.secrets, operator_can_save=args.operator_can_save,
-              resume=args.resume, record=args.record)
+              resume=args.resume, record=args.record, record_ros2=args.ros2)
 

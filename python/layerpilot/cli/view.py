@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+from layerpilot.cli.nodes import add_ros2_record_flag
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("view", help="join a running mission on the bus and show it live in Rerun")
@@ -27,6 +29,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     _bus_options(p)
     p.add_argument("out", help="the .mcap file to write")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    add_ros2_record_flag(p)
     p.set_defaults(func=_record)
 
     p = commands.add_parser("replay", help="rebuild a recording's map, and what another behavior would have chosen")
@@ -103,10 +106,12 @@ def _view(args: argparse.Namespace) -> int:
 def _record(args: argparse.Namespace) -> int:
     from layerpilot.bus.recording import Recorder
     from layerpilot.missionfile import resolve
+    from layerpilot.ros2.recording import recording_options
 
     mission, session = _session(args)
     try:
-        recorder = Recorder(session, args.out, resolve(args.config).read_text())
+        recorder = Recorder(session, args.out, resolve(args.config).read_text(),
+                            **recording_options(args.ros2, mission.ros2))
     except OSError as exc:
         session.close()
         raise OSError(f"out: {exc}") from None

@@ -88,14 +88,15 @@ class NodeProcess:
 
 def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
                   secrets=None, resume: bool = False, clock_start: float = 0.0,
-                  mission_id: str = "", frames: str = "sim") -> list[NodeProcess]:
+                  mission_id: str = "", frames: str = "sim", ros2: bool = False) -> list[NodeProcess]:
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide (``frames``:
     ``camera`` runs `layerpilot camera` in the sim node's place, for a real camera; ``photos`` runs only
     `layerpilot camera` and depth: a photo folder is the camera and the telemetry, nothing flies); with
     ``secrets`` (bus.security.MissionSecrets) each node logs in with its own credentials file;
     ``resume``: the decide nodes continue the saved survey (``decide --resume``); ``clock_start``:
     where the sim and link nodes' stamps start on the mission clock (``--clock-start``);
-    ``mission_id``: this run's, so that a restarted decide node continues what it saved."""
+    ``mission_id``: this run's, so that a restarted decide node continues what it saved; ``ros2``: one
+    `layerpilot ros2` bridge per vehicle as well (``[ros2] enabled``)."""
     from layerpilot.bus.security import node_user
 
     base = [sys.executable, "-m", "layerpilot.cli"]
@@ -106,7 +107,8 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
 
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
-        for role in (("camera", "depth") if frames == "photos" else (frames, "link", "depth", "decide")):
+        roles = ("camera", "depth") if frames == "photos" else (frames, "link", "depth", "decide")
+        for role in roles + (("ros2",) if ros2 else ()):
             own = {"decide": ["--mission-id", mission_id] + (["--resume"] if resume else []),
                    "sim": ["--clock-start", repr(clock_start)], "link": ["--clock-start", repr(clock_start)]}
             argv = base + [role, "--vehicle", v] + common + login(role, v) + own.get(role, [])
@@ -190,9 +192,11 @@ def frames_of(source: str) -> str:
 
 def up(mission: str | None, *, endpoint: str | None = None, status_every: float = 2.0,
        duration: float | None = None, log_dir: str | Path = "runs/logs", secrets_dir: str | Path | None = None,
-       operator_can_save: bool = False, resume: bool = False, record: str | Path | None = None) -> int:
+       operator_can_save: bool = False, resume: bool = False, record: str | Path | None = None,
+       record_ros2: str = "off") -> int:
     """``secrets_dir``: where the bus credentials go (default ``<log_dir>/../bus-secrets``);
-    ``record``: an MCAP file every bus message is written to (bus/recording.py); ``resume``: continue
+    ``record``: an MCAP file every bus message is written to (bus/recording.py), with ROS 2 channels
+    beside or instead of the protobuf ones (``record_ros2``: ros2.recording.MODES); ``resume``: continue
     the survey saved in ``decide.state`` after a battery swap (refused before anything starts if a
     vehicle has none)."""
     from layerpilot.bus.security import open_hub
@@ -220,19 +224,21 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     if bus.security:  # the hub: holds the well-known endpoint, checks every login, enforces the allow-list
         secrets_dir = Path(log_dir).parent / "bus-secrets" if secrets_dir is None else Path(secrets_dir)
         session, secrets = open_hub(bus, secrets_dir, m.vehicles, bus.operator_can_save or operator_can_save,
-                                    photos=frames_of(m.camera.source) == "photos")
+                                    photos=frames_of(m.camera.source) == "photos",
+                                    ros2=(m.ros2.domain_id, m.ros2.namespace) if m.ros2.enabled else None)
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
     mission_id = uuid.uuid4().hex[:12]
     sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id,
-                                   frames_of(m.camera.source)),
+                                   frames_of(m.camera.source), m.ros2.enabled),
                      Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud
         from layerpilot.bus.recording import Recorder
+        from layerpilot.ros2.recording import recording_options
 
         try:
-            recorder = Recorder(session, record, path.read_text())
+            recorder = Recorder(session, record, path.read_text(), **recording_options(record_ros2, m.ros2))
         except OSError as exc:
             session.close()
             raise OSError(f"--record: {exc}") from None
