@@ -214,7 +214,8 @@ def test_access_control_is_an_allow_list():
     queries = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["messages"] == ["query"] and r["flows"] == ["ingress"]}
     assert queries == {"decide-uav1/query": ["layerpilot/uav1/map/layers"],
                        "operator/query": ["layerpilot/*/map/stats", "layerpilot/*/map/layers",
-                                          "layerpilot/*/map/voxels", "layerpilot/*/decide/aggregates"]}
+                                          "layerpilot/*/map/voxels", "layerpilot/*/map/octree",
+                                          "layerpilot/*/decide/aggregates"]}
     answers = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["messages"] == ["declare_queryable", "reply"]}
     assert answers["decide-uav1/answer"] == ["layerpilot/uav1/decide/aggregates"]  # its own vehicle's only
     assert set(answers) == {"decide-uav1/answer", "map-server/answer"}

@@ -16,11 +16,13 @@ from layerpilot.bus import messages as bus
 from layerpilot.bus.keys import Keys
 from layerpilot.bus.layerset import GridLayersMessage, encode_layer_set
 from layerpilot.bus.recording import RecordingReader, RecordingWriter
+from layerpilot.bus.reject import BadMessage
 from layerpilot.bus.security import open_hub, open_node_session
 from layerpilot.bus.session import BusConfig, free_endpoint, publish
 from layerpilot.config import ConfigError
 from layerpilot.geometry import PointCloud, Pose
 from layerpilot.grid import GridGeometry
+from layerpilot.map import VoxelMap
 from layerpilot.nodes.ros2 import Ros2Bridge
 from layerpilot.ros2 import messages as ros
 from layerpilot.ros2.recording import recording_options
@@ -124,6 +126,20 @@ def test_every_translated_message_decodes_into_the_expected_fields():
     assert np.asarray(m.data[4].data)[:1].view(np.uint32)[0] == (10 << 16 | 20 << 8 | 30)
 
 
+def test_an_octree_becomes_the_octomap_message_octomap_msgs_makes_of_it():
+    vm = VoxelMap(0.5)
+    points = np.random.default_rng(0).uniform(-10, 10, (2000, 3)).astype(np.float32)
+    vm.insert(points, np.array([0.0, 0.0, 30.0]), None, stamp=1.0)
+    m = Ros2Topics(Ros2Config()).octomap("uav1", 12.0, vm.to_bytes(".bt"))
+    assert m.topic == "/layerpilot/uav1/octomap"
+    back = ros.deserialize(ros.serialize(m.message, m.type.name), ros.OCTOMAP)
+    assert (back.binary, back.id, back.resolution, back.header.stamp.sec) == (True, "OcTree", 0.5, 12)
+    # octomap_msgs' binaryMapToMsg carries writeBinaryData: the .bt file's tree stream, without its header
+    assert np.asarray(back.data, np.int8).tobytes() == vm.to_bytes(".bt").partition(b"\ndata\n")[2]
+    with pytest.raises(BadMessage, match="bad octree: not an OctoMap .bt stream"):
+        Ros2Topics(Ros2Config()).octomap("uav1", 12.0, b"hello")
+
+
 def test_the_path_keeps_poses_a_spacing_apart_and_goes_out_at_its_rate():
     topics = Ros2Topics(Ros2Config(path_rate=1.0, path_spacing=1.0))
     sent = []
@@ -154,7 +170,7 @@ def test_the_bridge_on_a_secured_bus_publishes_rmw_zenoh_topics_that_a_ros2_tool
     hub, secrets = open_hub(cfg, tmp_path / "secrets", ["uav1"], ros2=(0, "/layerpilot"))
     sessions = {user: open_node_session(cfg, secrets.credentials_file(user))
                 for user in ("ros2-uav1", "link-uav1", "depth-uav1", "map-server", "operator")}
-    bridge = Ros2Bridge(sessions["ros2-uav1"], "uav1", Ros2Config())
+    bridge = Ros2Bridge(sessions["ros2-uav1"], "uav1", Ros2Config(octomap_period=0))  # no map server here
     received: dict[str, list] = {}
     tool = sessions["operator"]
     sub = tool.declare_subscriber("0/layerpilot/uav1/**", lambda s: received.setdefault(
@@ -182,7 +198,7 @@ def test_the_bridge_on_a_secured_bus_publishes_rmw_zenoh_topics_that_a_ros2_tool
         assert any(t.startswith(f"@ros2_lv/0/{zid}/0/") and t.endswith(
             f"/MP/%/%layerpilot/uav1_bridge/%layerpilot%uav1%pose/geometry_msgs::msg::dds_::PoseStamped_/"
             f"{pose_hash}/:2:,10:,:,:,,") for t in tokens), tokens
-        assert len(tokens) == 1 + 6  # the node and its six publishers (target: no decision was sent)
+        assert len(tokens) == 1 + 7  # the node and its seven publishers, announced at its start
         assert bridge.rejects.total == 1 and bridge.status()["published"]["/layerpilot/uav1/pose"] == 3
         forged = []
         sessions["link-uav1"].declare_subscriber("0/**", lambda s: forged.append(s))
@@ -227,7 +243,7 @@ def test_a_recording_with_ros2_channels_reads_back_with_mcaps_ros2_decoder(tmp_p
 
 def test_up_with_ros2_enabled_runs_the_bridge_and_records_ros2_channels(tmp_path):
     """A live mission with ``[ros2] enabled``: `up` starts ros2/uav1 with its own login; a ROS 2 tool (the
-    operator's login) receives the pose, the target and the map as CDR; ``--record --ros2 beside`` holds
+    operator's login) receives the pose, the target, the map and the map server's octree as CDR; ``--record --ros2 beside`` holds
     both the protobuf and the ROS 2 channels."""
     from conftest import free_tcp_port, operator_session, start_up, stop_up
 
@@ -249,6 +265,7 @@ height = 120
 [ros2]
 enabled = true
 domain_id = 7
+octomap_period = 1.0
 """)
     recording = tmp_path / "mission.mcap"
     up, lines = start_up(mission, ep, tmp_path / "logs", "--record", str(recording), "--ros2", "beside")
@@ -261,7 +278,9 @@ domain_id = 7
         end = time.monotonic() + 120
         def climbing() -> bool:  # the bridge's pose follows the vehicle up
             return any(ros.deserialize(p, ros.POSE_STAMPED).pose.position.z > 5.0 for p in got.get("pose", [])[-5:])
-        while not ({"pose", "target", "map", "cloud"} <= set(got) and climbing()):
+        def mapped() -> bool:  # an octomap of the map the clouds built, not the first, empty one
+            return any(len(ros.deserialize(p, ros.OCTOMAP).data) > 1000 for p in got.get("octomap", [])[-2:])
+        while not ({"pose", "target", "map", "cloud"} <= set(got) and climbing() and mapped()):
             assert up.poll() is None, "up exited:\n" + "".join(lines[-30:])
             assert time.monotonic() < end, f"only {sorted(got)}:\n" + "".join(lines[-30:])
             time.sleep(0.2)
@@ -269,6 +288,8 @@ domain_id = 7
         target = ros.deserialize(got["target"][-1], ros.POSE_STAMPED)
         assert target.header.frame_id == "map" and np.isfinite(target.pose.position.x)
         assert ros.deserialize(got["map"][-1], ros.OCCUPANCY_GRID).info.width == 256  # the mission's window
+        octomap = ros.deserialize(got["octomap"][-1], ros.OCTOMAP)
+        assert (octomap.id, octomap.resolution, octomap.binary) == ("OcTree", 1.0, True) and len(octomap.data) > 1000
     finally:
         if client is not None:
             client.close()

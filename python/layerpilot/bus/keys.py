@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 PREFIX = "layerpilot"
 TOPICS = ("camera", "cloud", "pose", "layers", "decision", "waypoint", "state")
-SERVICES = ("layers", "stats", "save", "voxels")
+SERVICES = ("layers", "stats", "save", "voxels", "octree")
 NODES = ("sim", "camera", "link", "depth", "decide", "ros2", "map-server")  # whose status goes out on health/<node>
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 

@@ -43,7 +43,7 @@ _log = logging.getLogger("layerpilot.bus")
 OPERATOR = "operator"
 VEHICLE_ROLES = ("sim", "camera", "link", "depth", "decide")
 MAP_SERVER = "map-server"
-OPERATOR_QUERIES = ("stats", "layers", "voxels")  # the operator's read-only map services; "save" only if allowed
+OPERATOR_QUERIES = ("stats", "layers", "voxels", "octree")  # read-only map services; "save" only if allowed
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,8 @@ def grants(vehicles: list[str], operator_can_save: bool = False, photos: bool = 
         for v in vehicles:
             k = keys.Keys(v)
             out[node_user("ros2", v)] = Grant(publish=ros_topics + (k.health("ros2"),), announce=graph,
-                                              subscribe=(k.pose, k.decision, k.cloud, k.layers))
+                                              subscribe=(k.pose, k.decision, k.cloud, k.layers),
+                                              query=(k.service("octree"),))
     allowed = OPERATOR_QUERIES + (("save",) if operator_can_save else ())
     out[OPERATOR] = Grant(subscribe=(f"{keys.PREFIX}/**",) + ros_topics,  # every topic and every node's health
                           query=tuple(f"{keys.PREFIX}/*/map/{name}" for name in allowed)

@@ -238,6 +238,10 @@ class MapServer:
         size = self.snapshot()
         return pb.SaveReply(path=str(Path(self.cfg.snapshot).resolve()), bytes=size).SerializeToString()
 
+    def _query_octree(self, vehicle: str, p: dict[str, str]) -> bytes:
+        """The whole map as an OctoMap ``.bt`` stream (occupancy only): what octomap_msgs carries."""
+        return self.map.to_bytes(".bt")
+
     def _query_voxels(self, vehicle: str, p: dict[str, str]) -> bytes:
         occ = _num(p, "occ", None, optional=True)
         offset = _num(p, "offset", None, optional=True)

@@ -1,7 +1,7 @@
 """layerpilot's messages as ROS 2 messages: the types, their definitions and hashes, and CDR.
 
 The type store is rosbags' (a maintained, pure-Python ROS 2 type system and CDR serializer) for
-ROS 2 Jazzy, plus grid_map_msgs (not in rosbags' stores) from its Jazzy definitions. rosbags also
+ROS 2 Jazzy, plus grid_map_msgs and octomap_msgs (not in rosbags' stores) from their ROS 2 definitions. rosbags also
 computes each type's REP-2016 hash (``RIHS01_...``), the hash rmw_zenoh puts in its key
 expressions and ``ros2 bag`` in its metadata.
 
@@ -22,8 +22,11 @@ from layerpilot.map.columns import ColumnLayers
 
 FRAME = "map"
 
-# grid_map_msgs on ROS 2 Jazzy (ANYbotics/grid_map, branch jazzy): what RViz's grid_map plugin reads
-_GRID_MAP_MSGS = {
+# grid_map_msgs on ROS 2 Jazzy (ANYbotics/grid_map, branch jazzy): what RViz's grid_map plugin reads;
+# octomap_msgs (OctoMap/octomap_msgs, branch ros2): what octomap_rviz_plugins and octomap_server read
+_EXTRA_MSGS = {
+    "octomap_msgs/msg/Octomap": "std_msgs/Header header\nbool binary\nstring id\nfloat64 resolution\n"
+                                "int8[] data\n",
     "grid_map_msgs/msg/GridMapInfo": "float64 resolution\nfloat64 length_x\nfloat64 length_y\n"
                                      "geometry_msgs/Pose pose\n",
     "grid_map_msgs/msg/GridMap": "std_msgs/Header header\ngrid_map_msgs/GridMapInfo info\nstring[] layers\n"
@@ -35,14 +38,15 @@ PATH = "nav_msgs/msg/Path"
 POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 GRID_MAP = "grid_map_msgs/msg/GridMap"
+OCTOMAP = "octomap_msgs/msg/Octomap"
 GRID_MAP_LAYERS = ("elevation", "observed", "last_seen", "min_distance", "color")
 
 
 @lru_cache(maxsize=1)
 def typestore():
-    """rosbags' ROS 2 Jazzy types with grid_map_msgs added."""
+    """rosbags' ROS 2 Jazzy types with grid_map_msgs and octomap_msgs added."""
     store = get_typestore(Stores.ROS2_JAZZY)
-    for name, text in _GRID_MAP_MSGS.items():
+    for name, text in _EXTRA_MSGS.items():
         store.register(get_types_from_msg(text, name))
     return store
 
@@ -175,3 +179,15 @@ def grid_map(stamp: float, layers: ColumnLayers):
                                               pose=_pose(np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])))
     return t[GRID_MAP](header=_header(stamp), info=info, layers=list(GRID_MAP_LAYERS), basic_layers=["elevation"],
                        data=data, outer_start_index=0, inner_start_index=0)
+
+
+def octomap(stamp: float, bt: bytes):
+    """An OctoMap ``.bt`` stream as octomap_msgs carries it (``binaryMapToMsg``): id and resolution from the
+    stream's header, the tree's data after it; ValueError if ``bt`` is not one."""
+    head, sep, data = bt.partition(b"\ndata\n")
+    fields = dict(line.split(" ", 1) for line in head.decode("ascii", "replace").splitlines()[1:]
+                  if line and not line.startswith("#") and " " in line)
+    if not sep or not bt.startswith(b"# Octomap OcTree binary file") or "res" not in fields:
+        raise ValueError("not an OctoMap .bt stream (no '# Octomap OcTree binary file' header with res and data)")
+    return _types()[OCTOMAP](header=_header(stamp), binary=True, id=fields.get("id", "OcTree"),
+                             resolution=float(fields["res"]), data=np.frombuffer(data, np.int8))

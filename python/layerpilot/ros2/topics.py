@@ -8,6 +8,7 @@
 | ``layerpilot/<v>/cloud`` | ``<ns>/<v>/cloud`` | sensor_msgs/msg/PointCloud2 |
 | ``layerpilot/<v>/layers`` | ``<ns>/<v>/map`` | nav_msgs/msg/OccupancyGrid |
 | ``layerpilot/<v>/layers`` | ``<ns>/<v>/grid_map`` | grid_map_msgs/msg/GridMap |
+| ``layerpilot/<v>/map/octree`` (asked every ``octomap_period`` s) | ``<ns>/<v>/octomap`` | octomap_msgs/msg/Octomap |
 
 Vehicle names may hold ``-``, which ROS names may not: it becomes ``_``.
 """
@@ -21,6 +22,7 @@ import numpy as np
 
 from layerpilot.bus import messages as bus
 from layerpilot.bus.layerset import decode_layer_set, to_column_layers
+from layerpilot.bus.reject import BadMessage
 from layerpilot.config import ConfigError, check_range
 from layerpilot.geometry import Pose
 from layerpilot.ros2 import messages as ros
@@ -39,6 +41,7 @@ class Ros2Config:
     path_rate: float = 1.0  # Hz at most of the flown path
     path_spacing: float = 1.0  # m between two kept poses of the path
     path_poses: int = 5000  # the path keeps its newest this many poses
+    octomap_period: float = 10.0  # s between two octomap messages (the map server's whole map); 0 = none
 
     def __post_init__(self) -> None:
         check_range("ros2.domain_id", self.domain_id, 0, 232)  # ROS 2's usable domain ids
@@ -48,6 +51,8 @@ class Ros2Config:
         check_range("ros2.path_rate", self.path_rate, 0.01, 100.0)
         check_range("ros2.path_spacing", self.path_spacing, 0.0, 1000.0)
         check_range("ros2.path_poses", self.path_poses, 2, 1_000_000)
+        if self.octomap_period != 0:
+            check_range("ros2.octomap_period", self.octomap_period, 1.0, 3600.0)
 
 
 def ros_vehicle(vehicle: str) -> str:
@@ -82,7 +87,8 @@ class Ros2Topics:
         self._paths: dict[str, _Path] = {}
 
     OUTPUTS = (("pose", ros.POSE_STAMPED), ("path", ros.PATH), ("target", ros.POSE_STAMPED),
-               ("cloud", ros.POINT_CLOUD2), ("map", ros.OCCUPANCY_GRID), ("grid_map", ros.GRID_MAP))
+               ("cloud", ros.POINT_CLOUD2), ("map", ros.OCCUPANCY_GRID), ("grid_map", ros.GRID_MAP),
+               ("octomap", ros.OCTOMAP))
 
     def topic(self, vehicle: str, name: str) -> str:
         return f"{self.cfg.namespace}/{ros_vehicle(vehicle)}/{name}"
@@ -113,6 +119,14 @@ class Ros2Topics:
                     RosMessage(self.topic(ls.vehicle, "grid_map"), ros.RosType(ros.GRID_MAP),
                                ros.grid_map(ls.stamp, cl), ls.stamp)]
         return []
+
+    def octomap(self, vehicle: str, stamp: float, bt: bytes) -> RosMessage:
+        """The map server's ``map/octree`` reply (a ``.bt`` stream) as the vehicle's octomap topic."""
+        try:
+            message = ros.octomap(stamp, bt)
+        except ValueError as exc:
+            raise BadMessage("bad octree", str(exc)) from None
+        return RosMessage(self.topic(vehicle, "octomap"), ros.RosType(ros.OCTOMAP), message, stamp)
 
     def _path(self, s: bus.State) -> list[RosMessage]:
         p = self._paths.setdefault(s.vehicle, _Path())
