@@ -4,15 +4,21 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 
 import numpy as np
 import pytest
 
+from layerpilot.bus.session import free_endpoint
 from layerpilot.cli import main
 from layerpilot.eval.geotiff import MAP_LAYERS, exportable_layers
 from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.geodesy import LocalFrame
 from layerpilot.map import VoxelMap
+from layerpilot.missionfile import load_mission
+from layerpilot.sim.endpoint_config import SITL_DATUM
+from layerpilot.sim.world import World
+from conftest import SMALL_MISSION_NODES, free_tcp_port, start_up, stop_up
 
 FRAME = LocalFrame(46.85927, -91.99449, 198.3)  # the Brighton Beach photos' first camera
 
@@ -107,3 +113,35 @@ def test_export_names_only_layers_a_map_alone_gives(exported, tmp_path, capsys):
                    "'nope' (unknown); exportable: " + ", ".join(exportable_layers()))
     assert "view_gain" not in exportable_layers() and set(MAP_LAYERS) <= set(exportable_layers())
     assert not (run / "geotiff").exists()
+
+
+def test_a_live_up_run_directory_is_exported_as_it_is(tmp_path, capsys):
+    """`up` with a map snapshot: its simulator node writes frame.json beside the snapshots (the EKF origin,
+    home on the ground), so `layers export` takes the run directory without --origin."""
+    run = tmp_path / "run"
+    mission = tmp_path / "mission.toml"
+    mission.write_text(f"""
+vehicles = ["uav1"]
+speed = 4.0
+mavlink_port = {free_tcp_port()}
+[map_server]
+snapshot = "{run / 'map.ot'}"
+snapshot_period = 1.0
+[sim.world]
+size = 200.0
+""" + SMALL_MISSION_NODES)
+    up, lines = start_up(mission, free_endpoint(), tmp_path / "logs")
+    try:
+        end = time.monotonic() + 120  # a bound on waiting (take-off, then the first clouds), not a speed check
+        while not ((run / "map.ot").is_file() and (run / "frame.json").is_file()):
+            assert up.poll() is None and time.monotonic() < end, "".join(lines[-30:])
+            time.sleep(0.5)
+    finally:
+        stop_up(up)
+    ground = float(World(load_mission(mission).sim.world).terrain_height(0.0, 0.0))
+    frame = json.loads((run / "frame.json").read_text())
+    assert frame == pytest.approx({"lat": SITL_DATUM.lat, "lon": SITL_DATUM.lon, "alt": SITL_DATUM.alt + ground},
+                                  abs=1e-6)
+    assert main(["layers", "export", str(run)]) == 0
+    assert "CRS: layerpilot map frame at 47.3977420, 8.5455940" in capsys.readouterr().out
+    assert (run / "geotiff" / "elevation_m.tif").stat().st_size > 0

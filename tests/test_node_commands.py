@@ -78,6 +78,14 @@ def test_sim_node_rejects_a_bad_rate_naming_the_flag(tmp_path):
     assert "Traceback" not in done.stderr
 
 
+def test_sim_node_does_not_write_the_frame_of_another_autopilot(tmp_path):
+    """camera_only: the vehicle is ArduPilot's or PX4's SITL, whose EKF origin this node cannot know."""
+    done = run("sim", "--config", mission(tmp_path, "camera_only = true\n" + SMALL_SIM), "--endpoint", free_endpoint(),
+               "--write-frame", str(tmp_path / "run"))
+    assert done.returncode == 2 and "--write-frame: with camera_only = true" in done.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_sim_node_reports_a_busy_mavlink_port(tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

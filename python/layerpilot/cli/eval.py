@@ -102,12 +102,13 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
 
 def _demo(args: argparse.Namespace) -> None:
     mission = _mission(args)
-    behavior, duration = mission.decide.behavior, mission.evaluation.duration
+    behavior = mission.decide.behavior
     result = _run(mission, Path(mission.evaluation.out) / (args.name or f"demo-{Path(behavior).stem}"),
                   rrd=not args.no_rrd, web_port=args.web_port if args.view == "web" else None,
                   spawn=args.view == "native")
     print(_table({behavior: result.final}))
-    print(f"{duration:.0f} simulated s in {result.wall_s:.1f} s wall ({duration / result.wall_s:.1f}x real "
+    flown = result.final["t"]  # the duration, or less when the pilot came home for the battery
+    print(f"{flown:.0f} simulated s in {result.wall_s:.1f} s wall ({flown / result.wall_s:.1f}x real "
           f"time); {result.waypoints} waypoints, {result.frames} frames, {result.clouds} {mission.depth.source} clouds")
     print(f"report: {result.report['html']}")
 

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from layerpilot.cli.nodes import Running, add_clock_flag, add_node_command, clock_from_args
+
+if TYPE_CHECKING:
+    from layerpilot.geodesy import LocalFrame
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -21,6 +24,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, help="mission clock speed vs real time (default: the mission's)")
     p.add_argument("--duration", type=float, help="stop after this many mission seconds (default: until SIGTERM)")
     add_clock_flag(p)  # camera-only frames take the poses' stamps, already on the mission clock
+    p.add_argument("--write-frame", metavar="DIR", type=Path,
+                   help="write DIR/frame.json: where the map frame (the EKF origin, home on the ground) lies on "
+                        "the Earth, for `layers export` and `plan next` (`up` gives the map snapshot's directory)")
     sub = p.add_subparsers(dest="sim_command", metavar="ACTION")
     pv = sub.add_parser("preview", help="write a PNG: camera view, its depth, top-down map of the world")
     # SUPPRESS: given before or after `preview`, these keep their value
@@ -48,6 +54,9 @@ def _node(args, mission, vehicle, session) -> Running:
     from layerpilot.nodes.sim import CameraOnlyNode, SimNode
 
     if mission.camera_only:
+        if args.write_frame is not None:
+            raise ValueError("--write-frame: with camera_only = true the vehicle is another autopilot, whose EKF "
+                             "origin this node does not know")
         node = CameraOnlyNode(session, vehicle, mission.sim)
         return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
                        info={"camera_only": True}, run=node.run)
@@ -57,8 +66,26 @@ def _node(args, mission, vehicle, session) -> Running:
                        clock=clock_from_args(args))
     except OSError as exc:  # the MAVLink port is taken or the address is wrong
         raise ValueError(f"MAVLink {config.urls[0]}: {exc}") from None
+    info = node.describe()
+    if args.write_frame is not None:
+        info["frame"] = _write_frame(args.write_frame, node.sim.endpoint.ekf_frame)
     return Running(lambda: {"frames": node.frames, "time": round(node.clock(node.sim.time), 2)},
-                   info=node.describe(), run=node.run)
+                   info=info, run=node.run)
+
+
+def _write_frame(run_dir: Path, frame: LocalFrame) -> str:
+    """frame.json in ``run_dir``; a directory that cannot be written is logged, not fatal (the vehicle flies
+    without it, as the map server serves on when its snapshot cannot be written)."""
+    import logging
+
+    from layerpilot.eval.run_frame import write_run_frame
+
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        return str(write_run_frame(run_dir, frame))
+    except OSError as exc:
+        logging.getLogger("layerpilot.sim").warning("--write-frame: cannot write frame.json: %s", exc)
+        return ""
 
 
 def _preview(args: argparse.Namespace) -> None:

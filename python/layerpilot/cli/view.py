@@ -88,7 +88,8 @@ def _view(args: argparse.Namespace) -> int:
         session.close()
         raise
     view = LiveView(session, mission, MissionScene(stream.stream, args.color_by), vehicle,
-                    metrics=lambda cl, aoi, now: area_metrics(cl, aoi, now).as_dict())
+                    metrics=lambda cl, aoi, now: area_metrics(cl, aoi, now).as_dict(),
+                    warn=lambda line: print(f"layerpilot view: warning: {line}", file=sys.stderr, flush=True))
     view.start()
     print(json.dumps({"node": "view", "vehicle": vehicle, "status": "ready",
                       **({"url": stream.url} if stream.url else {})}), flush=True)

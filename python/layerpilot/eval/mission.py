@@ -23,7 +23,13 @@ set, a metric sample, the end), so the results are byte-identical to the sequent
 Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin at the
 EKF origin on the ground at home (the decide behavior's altitude is a height above home). The
 simulator renders in its world's frame; the camera frames and the pilot's position are moved into
-the map frame by the endpoint's ``ekf_origin``, as the live sim node does.
+the map frame by the endpoint's ``ekf_origin``, as the live sim node does. Where the map frame
+lies on the Earth (the EKF origin's latitude, longitude and altitude) goes into the run
+directory's ``frame.json``, which `layers export` and `plan next` read.
+
+The report's settings are the mission's, with the paths and addresses this run used in place of
+the file's (its map and survey in the run directory, the loopback MAVLink port and the link it flew
+with, the simulator's step).
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ import logging
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, TextIO
 
@@ -44,8 +50,10 @@ from layerpilot.decide import area_geometry, zone_mask
 from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.eval.alignment import MapScorer
 from layerpilot.eval.pose_errors import pose_errors
+from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
 from layerpilot.eval.summary import write_run_report
+from layerpilot.geodesy import LocalFrame
 from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.layers import compute_layers
 from layerpilot.link.config import LinkConfig
@@ -202,13 +210,13 @@ class LockstepMission:
         stages = Stages(("depth", "truth"), self.overlap)
         with Simulator(sim_cfg) as sim:
             host, port = sim.endpoint.addresses[0]
-            link = flight_link(self.mission, f"tcp:{host}:{port}")
+            link, frame = flight_link(self.mission, f"tcp:{host}:{port}"), sim.endpoint.ekf_frame
             try:
                 t, position = self._fly(sim, link, stages)
             finally:
                 stages.close()
                 link.close()
-        return self._write(out, link, t, position, time.monotonic() - wall0)
+        return self._write(out, link, frame, t, position, time.monotonic() - wall0)
 
     def _fly(self, sim: Simulator, link: FlightLink, stages: Stages) -> tuple[float, tuple[float, float, float]]:
         mission, ev, pilot = self.mission, self.mission.evaluation, self.pilot
@@ -314,12 +322,14 @@ class LockstepMission:
         stages.submit("depth", depth)
         stages.submit("truth", truth)
 
-    def _write(self, out: Path, link: FlightLink, t: float, position: tuple[float, float, float],
+    def _write(self, out: Path, link: FlightLink, frame: LocalFrame, t: float, position: tuple[float, float, float],
                wall_s: float) -> MissionResult:
+        """``frame``: where the map frame lies on the Earth."""
         est, pilot, mission = self.map, self.pilot, self.mission
         est.save(out / "map.ot")
         survey.save(pilot, out / "survey.json", t, t)  # the pilot's state: `decide --resume` can go on from here
         est.export_bt(out / "map.bt")
+        write_run_frame(out, frame)
         with open(out / "decisions.jsonl", "w") as f:
             for record in self.records:
                 f.write(json.dumps(record, default=_json_default) + "\n")
@@ -330,17 +340,22 @@ class LockstepMission:
         images["elevation_m"] = final_layers.elevation_m
         depth = self.pipeline.depth[self.vehicle]
         records = self.records
-        settings = {**to_settings(mission), "waypoints": len(records), "reached": pilot.reached,
+        used = {"map_server.snapshot": str(out / "map.ot"), "decide.state": str(out / "survey.json"),
+                "sim.urls": (link.config.url,), "sim.step_s": mission.evaluation.step_s,
+                **{f"link.link.{k}": v for k, v in asdict(link.config).items()}}
+        settings = {**to_settings(mission), **used, "waypoints": len(records), "reached": pilot.reached,
                     "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending
                     else "duration",
                     "retargets": sum(r["reason"] == "retarget" for r in records),
                     "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                     "frames": self.frames, "clouds": depth.clouds,
-                    **{f"depth_{k}": v for k, v in depth.stats().items()},  # why frames gave no cloud
-                    "wall_s": round(wall_s, 1), "real_time_factor": round(t / max(wall_s, 1e-9), 1)}
+                    **{f"depth_{k}": v for k, v in depth.stats().items()}}  # why frames gave no cloud
+        run = {"mission_s": round(t, 2), "wall_s": round(wall_s, 2),
+               "real_time_factor": round(t / max(wall_s, 1e-9), 2)}
         extra = self._pose_errors(depth.trajectory())
         paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", self.sampler.series,
-                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings, extra)
+                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings, extra,
+                                 run)
         return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records), self.frames, depth.clouds,
                              wall_s, paths, self.inputs)
 

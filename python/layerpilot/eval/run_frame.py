@@ -1,16 +1,17 @@
 """Where a run directory's map lies on the Earth, and which map file it holds.
 
 A run directory that knows its place carries ``frame.json``: the geodetic origin of its map
-frame, ``{"lat": deg, "lon": deg, "alt": m}`` (`layerpilot map images` writes it from the
-first photo). For a simulated mission the map frame's origin is the autopilot's EKF origin
-(home, on the ground), which the simulated vehicle puts at its configured geodetic origin;
-such runs have no ``frame.json`` and the commands take ``--origin LAT LON ALT`` instead.
+frame, ``{"lat": deg, "lon": deg, "alt": m}``. `layerpilot map images` writes it from the first
+photo; for a simulated mission the map frame's origin is the autopilot's EKF origin (home, on the
+ground: ``MavlinkVehicle.ekf_frame``), which the lock-step evaluator writes into its run directory
+and the simulator node beside the map server's snapshot. A map without one takes ``--origin LAT LON ALT``.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -20,8 +21,11 @@ FRAME_FILE = "frame.json"
 
 
 def write_run_frame(run_dir: Path, frame: LocalFrame) -> Path:
+    """Written whole (a reader, or another vehicle's simulator node writing the same, never sees half a file)."""
     path = Path(run_dir) / FRAME_FILE
-    path.write_text(json.dumps({"lat": frame.lat, "lon": frame.lon, "alt": frame.alt}) + "\n")
+    tmp = path.with_name(f".{FRAME_FILE}.{os.getpid()}")
+    tmp.write_text(json.dumps({"lat": frame.lat, "lon": frame.lon, "alt": frame.alt}) + "\n")
+    os.replace(tmp, path)
     return path
 
 

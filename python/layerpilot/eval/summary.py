@@ -1,7 +1,8 @@
 """Run and study reports from what a mission leaves behind: series, layers, path, settings.
 
 A run directory holds ``metrics.csv`` (the time series) and ``metrics.json`` (the final
-values under ``"final"``); the study report is built from run directories alone, so a
+values under ``"final"``, the settings under ``"settings"``, the run's own figures such as
+``real_time_factor`` at the top); the study report is built from run directories alone, so a
 study can be re-reported without flying again.
 """
 
@@ -35,6 +36,9 @@ POSE_COLUMNS = {f"pose_{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k
                 (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
                  ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"),
                  ("poses", "poses compared"))}
+# What a run took, beside what it scored: mission seconds per wall-clock second.
+RUN_ROWS = {"mission_s": "mission time simulated (s)", "wall_s": "wall-clock time (s)",
+            "real_time_factor": "real-time factor (mission s per wall s)"}
 
 
 def label(name: str) -> str:
@@ -64,10 +68,12 @@ def write_run_report(
     layer_images: Mapping[str, np.ndarray],
     settings: Mapping[str, Any],
     final_extra: Mapping[str, float] | None = None,
+    run: Mapping[str, float] | None = None,
 ) -> dict[str, Path]:
     """Write the CSV, plots and report.html/.md/metrics.json of one mission into ``run_dir``.
 
-    ``final_extra``: final values that are no time series (e.g. the pose errors over the mission).
+    ``final_extra``: final values that are no time series (e.g. the pose errors over the mission);
+    ``run``: what the run took (the keys of RUN_ROWS), a table of its own and top-level keys of metrics.json.
     """
     out = Path(run_dir)
     plots = out / "plots"
@@ -78,6 +84,9 @@ def write_run_report(
     report.heading("Final metrics")
     report.table(*final_table(final))
     report.text(f"Sampled every 10 simulated seconds; last sample at t = {final['t']:.1f} s.")
+    if run:
+        report.heading("Run")
+        report.table(["quantity", "value"], [[RUN_ROWS[k], v] for k, v in run.items()])
     if "offset_x" in final:
         report.text("Aligned: after removing one translation between the map and the true world (offset x/y/z, "
                     "estimated minus true, whole voxels: in a mission the common offset of the camera poses the "
@@ -96,7 +105,7 @@ def write_run_report(
     report.heading("Final layers")
     for name, values in layer_images.items():
         report.image(plot_layer(values, layers, plots / f"layer_{name}.png", name), name)
-    metrics = {"final": final, "settings": dict(settings)}
+    metrics = {**(run or {}), "final": final, "settings": dict(settings)}
     return report.write(out, metrics)
 
 
@@ -140,8 +149,10 @@ def _run_rows(dirs: Mapping[str, Sequence[Path]]) -> list[list[Any]]:
     rows = []
     for ds in dirs.values():
         for d in ds:
-            s = json.loads((d / "metrics.json").read_text())["settings"]
-            rows.append([d.name] + [s.get(k, "–") for k in ("frames", "clouds", "waypoints", "wall_s")])
+            metrics = json.loads((d / "metrics.json").read_text())
+            s = metrics["settings"]
+            rows.append([d.name] + [s.get(k, "–") for k in ("frames", "clouds", "waypoints")] +
+                        [metrics.get("wall_s", "–")])
     return rows
 
 

@@ -88,7 +88,8 @@ class NodeProcess:
 
 def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
                   secrets=None, resume: bool = False, clock_start: float = 0.0,
-                  mission_id: str = "", frames: str = "sim", ros2: bool = False) -> list[NodeProcess]:
+                  mission_id: str = "", frames: str = "sim", ros2: bool = False,
+                  frame_dir: Path | None = None) -> list[NodeProcess]:
     """map-server first (one for all vehicles), then per vehicle sim, link, depth, decide (``frames``:
     ``camera`` runs `layerpilot camera` in the sim node's place, for a real camera; ``photos`` runs only
     `layerpilot camera` and depth: a photo folder is the camera and the telemetry, nothing flies); with
@@ -96,7 +97,8 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
     ``resume``: the decide nodes continue the saved survey (``decide --resume``); ``clock_start``:
     where the sim and link nodes' stamps start on the mission clock (``--clock-start``);
     ``mission_id``: this run's, so that a restarted decide node continues what it saved; ``ros2``: one
-    `layerpilot ros2` bridge per vehicle as well (``[ros2] enabled``)."""
+    `layerpilot ros2` bridge per vehicle as well (``[ros2] enabled``); ``frame_dir``: where the sim nodes
+    write frame.json (``sim --write-frame``: the map snapshot's directory, so the run's map has its place)."""
     from layerpilot.bus.security import node_user
 
     base = [sys.executable, "-m", "layerpilot.cli"]
@@ -105,12 +107,14 @@ def node_commands(mission_path: Path, vehicles: list[str], endpoint: str | None,
     def login(role: str, vehicle: str | None = None) -> list[str]:
         return [] if secrets is None else ["--credentials", str(secrets.credentials_file(node_user(role, vehicle)))]
 
+    sim_frame = [] if frame_dir is None else ["--write-frame", str(frame_dir)]
     nodes = [NodeProcess("map-server", base + ["map-server"] + common + login("map-server"))]
     for v in vehicles:
         roles = ("camera", "depth") if frames == "photos" else (frames, "link", "depth", "decide")
         for role in roles + (("ros2",) if ros2 else ()):
             own = {"decide": ["--mission-id", mission_id] + (["--resume"] if resume else []),
-                   "sim": ["--clock-start", repr(clock_start)], "link": ["--clock-start", repr(clock_start)]}
+                   "sim": ["--clock-start", repr(clock_start)] + sim_frame,
+                   "link": ["--clock-start", repr(clock_start)]}
             argv = base + [role, "--vehicle", v] + common + login(role, v) + own.get(role, [])
             nodes.append(NodeProcess(f"{role}/{v}", argv))
     return nodes
@@ -229,8 +233,10 @@ def up(mission: str | None, *, endpoint: str | None = None, status_every: float 
     else:
         session = open_session(bus)  # bus.security = false: an open peer bus, for debugging only
     mission_id = uuid.uuid4().hex[:12]
+    # the simulated vehicles' EKF origin beside the map's snapshots (camera_only: another autopilot's, unknown)
+    frame_dir = Path(m.map_server.snapshot).parent if m.map_server.snapshot and not m.camera_only else None
     sup = Supervisor(node_commands(path.resolve(), m.vehicles, endpoint, secrets, resume, clock, mission_id,
-                                   frames_of(m.camera.source), m.ros2.enabled),
+                                   frames_of(m.camera.source), m.ros2.enabled, frame_dir),
                      Path(log_dir))
     recorder = None
     if record is not None:  # listening before any node starts: the recording misses no cloud

@@ -47,6 +47,7 @@ from collections.abc import Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from layerpilot.config import check_range
+from layerpilot.geodesy import LocalFrame
 from layerpilot.link import modes
 from layerpilot.sim.auto_mode import AutoMode
 from layerpilot.sim.autopilot_state import AutopilotState
@@ -113,6 +114,13 @@ class MavlinkVehicle:
     def addresses(self) -> list[tuple[str, int]]:
         """Bound (host, port) of each transport, in the order of ``urls`` (useful with port 0)."""
         return self.port.addresses
+
+    @property
+    def ekf_frame(self) -> LocalFrame:
+        """The EKF origin on the Earth (what GPS_GLOBAL_ORIGIN reports): where the autopilot's local frame,
+        a mission's map frame, lies; a run directory's ``frame.json``."""
+        lat, lon, alt = self.config.origin.to_geodetic(*self.ekf_origin)
+        return LocalFrame(float(lat), float(lon), float(alt))
 
     @property
     def clients(self) -> int:

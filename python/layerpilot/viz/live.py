@@ -7,6 +7,9 @@ On the same period it asks the decide node for the last tick's aggregate layers 
 queryable: the decide node sends them to no one else) and plots each node's health
 (``health/<node>``: the counters of its status line, their rates, heartbeat and input ages).
 A bad message is rejected and counted like in any node; the view never publishes anything.
+When nothing at all came in the first SILENCE seconds, it says so once (``warn``, and the
+scene's ``log``): a view on the wrong endpoint or vehicle, or with no mission, looks like a
+quiet one otherwise.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ DECODERS = {"camera": msg.decode_frame, "pose": msg.decode_state, "layers": deco
             "decision": msg.decode_decision, "waypoint": msg.decode_waypoint, "state": msg.decode_mission_state}
 # no clouds: they are the map server's, the view shows its map (and a cloud crossing a ground link costs MBs)
 VOXEL_BOX = 500  # voxels per side of the box the view asks the map server for
+SILENCE = 5.0  # s without a single message before the view says it hears nothing
 Metrics = Callable[[ColumnLayers, np.ndarray, float], dict[str, float]]
 
 
@@ -46,8 +50,10 @@ class LiveView:
     """The scene of one vehicle of a running mission (``metrics``: layers, area mask, now -> named values)."""
 
     def __init__(self, session: zenoh.Session, mission: Mission, scene: MissionScene, vehicle: str | None = None,
-                 metrics: Metrics | None = None, period: float = 0.2, map_period: float = 2.0) -> None:
-        self.session, self.mission, self.scene, self.metrics = session, mission, scene, metrics
+                 metrics: Metrics | None = None, period: float = 0.2, map_period: float = 2.0,
+                 warn: Callable[[str], None] = _log.warning) -> None:
+        """``warn``: where the one line goes when the bus stays silent (the view command: its console)."""
+        self.session, self.mission, self.scene, self.metrics, self.warn = session, mission, scene, metrics, warn
         self.vehicle = vehicle or mission.vehicles[0]
         self.keys = keys.Keys(self.vehicle)
         self.period, self.map_period = period, map_period
@@ -58,6 +64,7 @@ class LiveView:
         self._newest: dict[str, object] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._any = threading.Event()  # a message arrived on a subscribed key (good or rejected)
         self._now = 0.0  # newest mission time heard
         self._aoi: tuple[object, np.ndarray] | None = None
         self._grid: GridGeometry | None = None  # the layer images' grid: the aggregates are placed on it
@@ -81,6 +88,7 @@ class LiveView:
         self._thread.join()
 
     def _on_health(self, sample: zenoh.Sample) -> None:
+        self._any.set()
         key = str(sample.key_expr)
         try:
             health = msg.decode_health(sample.payload.to_bytes())
@@ -94,6 +102,7 @@ class LiveView:
             self._newest.setdefault("health", []).append(health)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        self._any.set()
         key = str(sample.key_expr)
         topic = key.rsplit("/", 1)[-1]
         try:
@@ -109,13 +118,18 @@ class LiveView:
 
     def _run(self) -> None:
         next_map, last_rates, last_counts = 0.0, time.monotonic(), Counter()
+        silence_check: float | None = time.monotonic() + SILENCE  # nothing heard by then: say so, once
         while not self._stop.wait(self.period):
             with self._lock:
                 newest, self._newest = self._newest, {}
                 counts = self.heard.copy()
             try:
-                self._log_messages(newest)
                 now = time.monotonic()
+                if silence_check is not None and now >= silence_check:
+                    silence_check = None
+                    if not self._any.is_set():
+                        self._say_silent()
+                self._log_messages(newest)
                 if now >= next_map:
                     next_map = now + self.map_period
                     self.scene.path()
@@ -126,6 +140,13 @@ class LiveView:
                     last_rates, last_counts = now, counts
             except Exception as exc:  # the view keeps going; the first failure of a kind is logged
                 self.rejects.reject("view", BadMessage(f"logging failed ({type(exc).__name__})", str(exc)))
+
+    def _say_silent(self) -> None:
+        line = (f"heard nothing on {keys.PREFIX}/{self.vehicle}/** for {SILENCE:g} s: is a mission with vehicle "
+                f"{self.vehicle} running (layerpilot up), and are --endpoint and --credentials right?")
+        self.warn(line)
+        self.scene.at(self._now)
+        self.scene.text(line, "WARN")
 
     def _log_messages(self, newest: dict) -> None:
         for state in newest.get("poses", []):

@@ -82,7 +82,8 @@ def require_free_port(host: str, port: int, what: str) -> None:
 
 
 def layout():
-    """The viewer's first layout: the 3D scene large; layers, camera, decisions and time series beside it."""
+    """The viewer's first layout: the 3D scene large; layers, camera, decisions (with the view's own warnings)
+    and time series beside it."""
     import rerun.blueprint as rrb
 
     layers = [rrb.Spatial2DView(origin=f"layers/{name}", name=name)
@@ -95,7 +96,7 @@ def layout():
         rrb.Horizontal(
             rrb.Spatial3DView(origin="world", name="mission"),
             rrb.Vertical(rrb.Tabs(*layers, *aggregates, rrb.Spatial2DView(origin="world/camera", name="camera")),
-                         rrb.TextLogView(origin="decision", name="decisions"),
+                         rrb.TextLogView(origin="/", contents=["decision", "log"], name="decisions and view log"),
                          rrb.Tabs(rrb.TimeSeriesView(origin="metrics", name="metrics"), *nodes,
                                   rrb.TimeSeriesView(origin="health", contents=["health/rate/**", "health/map/**",
                                                                                 "health/view/**"], name="bus"))),
