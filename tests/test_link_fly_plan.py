@@ -1,5 +1,5 @@
 """`layerpilot link fly-plan`: a .plan uploaded over real MAVLink (TCP loopback) to the simulated ArduCopter and
-flown in AUTO; a second client watches what the vehicle says (MISSION_CURRENT, MISSION_ITEM_REACHED and its
+flown in AUTO, and to the simulated PX4 and flown in AUTO.MISSION; a second client watches what the vehicle says (MISSION_CURRENT, MISSION_ITEM_REACHED and its
 GLOBAL_POSITION_INT, read through geodesy.LocalFrame)."""
 
 from __future__ import annotations
@@ -62,16 +62,20 @@ def plan_file(tmp_path):
     return write_plan(tmp_path / "three.plan", Plan(held, plan.home))
 
 
-@pytest.fixture
-def vehicle():
+@pytest.fixture(params=["ardupilot", "px4"])
+def vehicle(request):
     endpoint = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 0.0), ground_z=0.0), "tcp:127.0.0.1:0",
-                              EndpointConfig()).start(speed=10.0)
+                              EndpointConfig(flavour=request.param)).start(speed=10.0 if request.param == "ardupilot"
+                                                                           else 2.0)  # PX4's OFFBOARD: >= 2 Hz
+                                                                           # of setpoints on its clock
     yield endpoint, f"tcp:127.0.0.1:{endpoint.addresses[0][1]}"
     endpoint.stop()
 
 
 def test_the_vehicle_flies_the_plan_in_auto_and_reaches_each_waypoint_in_order(vehicle, plan_file, capsys):
     endpoint, url = vehicle
+    px4 = endpoint.config.flavour == "px4"
+    first = 0 if px4 else 1  # ArduPilot's item 0 is home; PX4's mission starts at 0
     watcher = Watcher(url)
     try:
         assert main(["link", "--mavlink", url, "--timeout", "60", "fly-plan", str(plan_file)]) == 0
@@ -82,38 +86,45 @@ def test_the_vehicle_flies_the_plan_in_auto_and_reaches_each_waypoint_in_order(v
     assert out.index("mission: flying to item 1 of 3") < out.index("mission: reached item 1 of 3") \
         < out.index("mission: flying to item 2 of 3") < out.index("mission: reached item 3 of 3") \
         < out.index("fly-plan: done")
-    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1, 2, 3]  # ArduPilot's item 0 is home
+    items = [first, first + 1, first + 2]
+    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == items
     current = [m.seq for m in watcher.of("MISSION_CURRENT")]
     flown = [s for i, s in enumerate(current) if i == 0 or s != current[i - 1]]
-    assert flown[-3:] == [1, 2, 3]
+    assert flown[-3:] == items
     last = watcher.of("MISSION_CURRENT")[-1]
-    assert (last.total, last.mission_state, last.mission_mode) == (3, mav.MISSION_STATE_COMPLETE, 1)
-    texts = [m.text for m in watcher.of("STATUSTEXT")]
-    assert [t for t in texts if t.startswith(("Mission:", "Reached"))] == [
-        "Mission: 1 WP", "Reached command #1", "Mission: 2 WP", "Reached command #2", "Mission: 3 WP",
-        "Reached command #3"]
+    assert (last.total, last.mission_state) == (3, mav.MISSION_STATE_COMPLETE)
+    assert last.mission_mode == 1 or px4  # ArduCopter still in AUTO; PX4 may have left for AUTO.LOITER already
+    if not px4:  # ArduCopter's words
+        texts = [m.text for m in watcher.of("STATUSTEXT")]
+        assert [t for t in texts if t.startswith(("Mission:", "Reached"))] == [
+            "Mission: 1 WP", "Reached command #1", "Mission: 2 WP", "Reached command #2", "Mission: 3 WP",
+            "Reached command #3"]
+    assert "pilot took over" not in out
     # where the vehicle said it was when it reported each item reached: the plan's lat/lon through LocalFrame
     lat, lon, alt = (np.array(v) for v in zip(*[(i.lat, i.lon, i.alt) for i in read_plan(plan_file).items]))
     expected = np.column_stack(SITL_DATUM.from_geodetic(lat, lon, SITL_DATUM.alt + alt))  # home: on the datum
-    for seq in (1, 2, 3):
-        index = next(k for k, m in enumerate(watcher.messages)
+    for k, seq in enumerate(items):
+        index = next(j for j, m in enumerate(watcher.messages)
                      if m.get_type() == "MISSION_ITEM_REACHED" and m.seq == seq)
         fix = next(m for m in reversed(watcher.messages[:index]) if m.get_type() == "GLOBAL_POSITION_INT")
         here = np.array(SITL_DATUM.from_geodetic(fix.lat * 1e-7, fix.lon * 1e-7, fix.alt * 1e-3), float)
-        assert np.linalg.norm(here - expected[seq - 1]) <= ACCEPTANCE_M, (seq, here, expected[seq - 1])
-        assert np.allclose(expected[seq - 1], WAYPOINTS[seq - 1], atol=0.011)  # the plan is the map's waypoints
-    # the mission's end: ArduCopter stays in AUTO and loiters at the last waypoint
-    assert endpoint.mode == "AUTO" and endpoint.armed
+        assert np.linalg.norm(here - expected[k]) <= ACCEPTANCE_M, (seq, here, expected[k])
+        assert np.allclose(expected[k], WAYPOINTS[k], atol=0.011)  # the plan is the map's waypoints
+    # the mission's end: ArduCopter stays in AUTO, PX4 switches to AUTO.LOITER; both hold at the last waypoint
+    assert endpoint.mode == ("LOITER" if px4 else "AUTO") and endpoint.armed
     assert np.linalg.norm(endpoint.pose().position - WAYPOINTS[-1]) <= ACCEPTANCE_M
 
 
 def test_a_pilot_taking_over_ends_the_flight_at_once_with_one_line(vehicle, plan_file, capsys):
     endpoint, url = vehicle
+    px4 = endpoint.config.flavour == "px4"
+    first = 0 if px4 else 1
+    loiter = (4, 3) if px4 else (5, 0)  # DO_SET_MODE: PX4's main and sub mode, ArduCopter's custom mode
 
     def take_over(seq: int, conn) -> None:
-        if seq == 1:
+        if seq == first:
             conn.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                                       5, 0, 0, 0, 0, 0)  # LOITER
+                                       *loiter, 0, 0, 0, 0)
 
     watcher = Watcher(url, take_over)
     try:
@@ -122,8 +133,8 @@ def test_a_pilot_taking_over_ends_the_flight_at_once_with_one_line(vehicle, plan
         watcher.close()
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["layerpilot link fly-plan: error: flying the mission: pilot took over: mode LOITER; "
-                   "paused until AUTO is handed back"]
-    assert endpoint.mode == "LOITER" and [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1]
+                   f"paused until {'MISSION' if px4 else 'AUTO'} is handed back"]
+    assert endpoint.mode == "LOITER" and [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [first]
 
 
 def test_fly_plan_refuses_an_empty_plan_before_connecting(tmp_path, capsys):
@@ -169,7 +180,8 @@ def test_a_plan_ending_in_land_or_rtl_is_flown_to_the_ground_and_succeeds(vehicl
     out = capsys.readouterr().out
     assert "fly-plan: 3 mission items accepted by system 1" in out and "fly-plan: done" in out
     assert f"mission: item 3 of 3 ({kind.upper()}) ended on the ground, disarmed" in out
-    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [1, 2]  # the waypoint, the DO item at once
+    first = 0 if endpoint.config.flavour == "px4" else 1
+    assert [m.seq for m in watcher.of("MISSION_ITEM_REACHED")] == [first, first + 1]  # the waypoint, the DO item
     assert not endpoint.armed and endpoint.pose().position[2] == pytest.approx(0.0, abs=0.05)
     assert np.linalg.norm(endpoint.pose().position[:2] - landed_at) < 0.5, endpoint.pose().position
     # the flight's default bound (60 s + 3 s per metre) goes over where the items fly: 12 m out, then 19.2 m

@@ -187,6 +187,7 @@ def _flown(plan, frame, home_z: float) -> list:
     import numpy as np
 
     from layerpilot.link.mission_transfer import LAND, RTL
+    from layerpilot.link.modes import FIRST_ITEM
 
     x, y, _ = frame.from_geodetic(plan.home[0], plan.home[1], 0.0)
     home = np.array([float(x), float(y), home_z])
@@ -206,22 +207,23 @@ def _flown(plan, frame, home_z: float) -> list:
 
 def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
     """Upload ``plan`` over a connection of its own (closed before the flight link opens the URL); only to
-    ArduPilot, whose AUTO the flight uses, and only when every place the plan flies to lies inside the
-    geofence (placed in the vehicle's frame; a LAND's only in the area: it ends on the ground, below the
-    altitude floor; an RTL's is home). MissionTransferError when the vehicle does not answer or refuses, or
+    ArduPilot or PX4, whose AUTO or AUTO.MISSION the flight uses, and only when every place the plan flies to
+    lies inside the geofence (placed in the vehicle's frame; a LAND's only in the area: it ends on the ground,
+    below the altitude floor; an RTL's is home). MissionTransferError when the vehicle does not answer or refuses, or
     an item is outside."""
     from layerpilot.link.connection import open_connection
     from layerpilot.link.geofence import OutsideGeofence
     from layerpilot.link.mission_transfer import LAND, RTL, MissionTransferError, upload_mission, vehicle_frame
-    from layerpilot.link.qgc_plan import ARDUPILOT, mission_items
+    from layerpilot.link.qgc_plan import ARDUPILOT, PX4, mission_items
 
     wait = config.connect_timeout_s if args.timeout is None else args.timeout
     conn = open_connection(config.url, config.source_system, config.source_component, config.baud)
     try:
         heartbeat = _autopilot_heartbeat(conn, config, wait)
-        if heartbeat.autopilot != ARDUPILOT:
-            raise MissionTransferError("fly-plan flies a stored mission in ArduPilot's AUTO; this autopilot is not "
-                                       "ArduPilot (upload it with `layerpilot link upload` and fly it there)")
+        if heartbeat.autopilot not in (ARDUPILOT, PX4):
+            raise MissionTransferError(f"fly-plan flies a stored mission in ArduPilot's AUTO or PX4's AUTO.MISSION; "
+                                       f"this autopilot (MAV_AUTOPILOT {heartbeat.autopilot}) is neither (upload it "
+                                       "with `layerpilot link upload` and fly it there)")
         target = (heartbeat.get_srcSystem(), heartbeat.get_srcComponent())
         frame, home_z = vehicle_frame(conn, target, wait)
         for i, item, point in _flown(plan, frame, home_z):
@@ -232,15 +234,17 @@ def _upload_for_auto(args: argparse.Namespace, config, plan, geofence) -> None:
                     geofence.check(*point, home_z)
             except OutsideGeofence as exc:
                 raise MissionTransferError(f"item {i} of the plan: {exc} (nothing uploaded)") from None
-        upload_mission(conn, mission_items(plan, ARDUPILOT), target, timeout=args.item_timeout, retries=args.retries)
+        upload_mission(conn, mission_items(plan, heartbeat.autopilot), target, timeout=args.item_timeout,
+                       retries=args.retries)
     finally:
         conn.close()
     print(f"fly-plan: {len(plan.items)} mission items accepted by system {heartbeat.get_srcSystem()}", flush=True)
 
 
 def _fly_mission(link, plan, bound: dict) -> None:
-    """Take off in GUIDED to the first flown item's altitude when on the ground, then AUTO until the last
-    item is reached (ArduPilot numbers the plan's items from 1: item 0 is home) or, when it is a LAND or an
+    """Take off in GUIDED/OFFBOARD to the first flown item's altitude when on the ground, then AUTO (PX4:
+    AUTO.MISSION) until the last item is reached (ArduPilot numbers the plan's items from 1: item 0 is home;
+    PX4 from 0) or, when it is a LAND or an
     RTL, until the vehicle disarmed on the ground there. Without --timeout the flight may take 60 s plus
     3 s per metre of the plan's path from home."""
     import numpy as np
@@ -248,6 +252,7 @@ def _fly_mission(link, plan, bound: dict) -> None:
     from layerpilot.geodesy import LocalFrame
     from layerpilot.link.link import ControlLost
     from layerpilot.link.mission_transfer import LAND, RTL
+    from layerpilot.link.modes import FIRST_ITEM
 
     flown = _flown(plan, LocalFrame(*plan.home), 0.0)
     path = np.vstack([[0.0, 0.0, 0.0]] + [point for _, _, point in flown])
@@ -256,14 +261,15 @@ def _fly_mission(link, plan, bound: dict) -> None:
         link.start_guided()
         link.arm()
         link.takeoff(float(flown[0][2][2]) if flown else 0.0, **bound)
-    n, current = len(plan.items), [0]
+    n, current, first = len(plan.items), [0], FIRST_ITEM[link.flavour]
 
-    def progress(kind: str, seq: int) -> None:
-        current[0] = seq if kind == "current" else current[0]
-        print(f"mission: {'flying to' if kind == 'current' else 'reached'} item {seq} of {n}", flush=True)
+    def progress(kind: str, seq: int) -> None:  # the plan's item numbers, 1..n, whatever the autopilot's
+        current[0] = seq - first + 1 if kind == "current" else current[0]
+        print(f"mission: {'flying to' if kind == 'current' else 'reached'} item {seq - first + 1} of {n}",
+              flush=True)
 
     try:
-        link.fly_mission(n, timeout, progress)
+        link.fly_mission(n - 1 + first, timeout, progress)
     except ControlLost as exc:  # a final LAND or RTL ends in a disarm on the ground: the mission is done
         if not (exc.kind == "disarmed" and current[0] == n and plan.items[-1].command in (LAND, RTL)):
             raise

@@ -76,7 +76,11 @@ class Control:
         if beat.disarmed and self.in_control:
             self._disarmed_at = time.monotonic()  # a reboot, or a disarm: the next uptime tells (check_disarm)
         elif self.in_control and not self.paused and mode != flying and beat.old_mode == flying:
-            if not (beat.restored and self.state.flavour == modes.PX4 and mode == modes.HOLD_MODE[modes.PX4]):
+            if self.auto and self.state.flavour == modes.PX4 and mode == modes.HOLD_MODE[modes.PX4] \
+                    and self.state.mission_complete:  # PX4's end of a mission: AUTO.LOITER, not a takeover
+                self.in_control = self.auto = False
+                reports.append("mission complete: PX4 holds in AUTO.LOITER")
+            elif not (beat.restored and self.state.flavour == modes.PX4 and mode == modes.HOLD_MODE[modes.PX4]):
                 self.paused = True
                 if failsafe := self._battery_failsafe():
                     self.failsafe = failsafe

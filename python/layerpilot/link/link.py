@@ -250,13 +250,14 @@ class FlightLink:
         self.guided.goto(x, y, z, yaw, look_at, face_waypoint, timeout)
 
     def fly_mission(self, last: int, timeout: float, progress: Callable[[str, int], None] | None = None) -> None:
-        """Fly the vehicle's stored mission in AUTO until item ``last`` is reached (MISSION_ITEM_REACHED).
+        """Fly the vehicle's stored mission in ArduPilot's AUTO or PX4's AUTO.MISSION until item ``last`` is
+        reached (MISSION_ITEM_REACHED; items count from modes.FIRST_ITEM).
 
-        ArduPilot only, armed and flying (ArduCopter refuses AUTO on the ground without a takeoff item).
+        Armed and flying (ArduCopter refuses AUTO on the ground without a takeoff item).
         ``progress("current", seq)`` on each new MISSION_CURRENT item, ``progress("reached", seq)`` on
         each MISSION_ITEM_REACHED. Raises :class:`ControlLost` at once on a takeover (any other mode),
         a disarm or a reboot, and LinkError when ``last`` is not reached within ``timeout`` seconds.
-        The vehicle stays in AUTO afterwards (ArduCopter loiters at the mission's end).
+        ArduCopter stays in AUTO afterwards (it loiters at the mission's end); PX4 switches to AUTO.LOITER.
         """
         fly_mission(self.state, self.commands, self.control, self.sync, last, timeout, progress)
 

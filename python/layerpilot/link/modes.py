@@ -13,12 +13,13 @@ _COPTER_ALL = {0: "STABILIZE", 1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED",
                7: "CIRCLE", 9: "LAND", 16: "POSHOLD", 17: "BRAKE", 21: "SMART_RTL"}
 
 # PX4: custom_mode = main_mode << 16 | sub_mode << 24.
-PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "TAKEOFF": (4, 2), "LOITER": (4, 3), "RTL": (4, 5),
-             "LAND": (4, 6), "OFFBOARD": (6, 0)}
+PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "TAKEOFF": (4, 2), "LOITER": (4, 3), "MISSION": (4, 4),
+             "RTL": (4, 5), "LAND": (4, 6), "OFFBOARD": (6, 0)}
 
 GUIDED_MODE = {ARDUPILOT: "GUIDED", PX4: "OFFBOARD"}
 HOLD_MODE = {ARDUPILOT: "LOITER", PX4: "LOITER"}
-MISSION_MODE = {ARDUPILOT: "AUTO"}  # the mode that flies the stored mission (PX4's AUTO.MISSION: not flown)
+MISSION_MODE = {ARDUPILOT: "AUTO", PX4: "MISSION"}  # the mode that flies the stored mission (PX4: AUTO.MISSION)
+FIRST_ITEM = {ARDUPILOT: 1, PX4: 0}  # the stored mission's first flown item: ArduPilot keeps home as item 0
 
 
 def px4_custom_mode(main: int, sub: int) -> int:

@@ -75,6 +75,7 @@ class VehicleState:
         self.uptime_at = -math.inf   # when (monotonic) the newest uptime reading arrived
         self.mission_current = -1    # the autopilot's MISSION_CURRENT.seq, and the items it reached
         self.reached: list[int] = []
+        self.mission_complete = False  # MISSION_CURRENT.mission_state says the mission is complete
 
     # --- receiving --------------------------------------------------------------------
     def identify(self, msg) -> bool:
@@ -136,6 +137,7 @@ class VehicleState:
             self.home = np.array(ned_to_enu(msg.x, msg.y, msg.z))
         elif kind == "MISSION_CURRENT":
             self.mission_current = msg.seq
+            self.mission_complete = getattr(msg, "mission_state", 0) == mav.MISSION_STATE_COMPLETE
         elif kind == "MISSION_ITEM_REACHED":
             self.reached.append(msg.seq)
         elif kind == "STATUSTEXT":

@@ -51,6 +51,7 @@ class AutoMission:
         self.items = items
         self._frame = frame
         self._home = home
+        self._first = first  # ArduPilot's item 0 is home: 1; PX4's missions start at 0
         self.current = first
         self.complete = False
         self._target: np.ndarray | None = None  # where the current item flies; None until it starts
@@ -115,9 +116,9 @@ class AutoMission:
         return nxt < len(self.items) and self.items[nxt].command == mav.MAV_CMD_NAV_WAYPOINT
 
     def send_current(self, in_auto: bool = True) -> None:
-        """MISSION_CURRENT: the item flown, the number of items without home, the mission's state, and
+        """MISSION_CURRENT: the item flown, the number of items (without ArduPilot's home), the mission's state, and
         whether the vehicle is in its mission mode (1) or not (0)."""
-        self._mav.mission_current_send(self.current, len(self.items) - 1, self.state, int(in_auto))
+        self._mav.mission_current_send(self.current, len(self.items) - self._first, self.state, int(in_auto))
 
     def _advance(self, vehicle: Multicopter) -> None:
         self._mav.statustext_send(mav.MAV_SEVERITY_INFO, f"Reached command #{self.current}".encode())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from layerpilot.link import modes
 from layerpilot.sim.auto_mission import TAKEOFF_REACHED_M
 from layerpilot.sim.auto_mode import AutoMode
 from layerpilot.sim.autopilot_state import AutopilotState
@@ -47,7 +48,7 @@ class Flight:
             self._landing.rtl()
         elif s.mode == "LAND" and s.airborne:
             self._landing.descend()
-        elif s.mode == "AUTO":
+        elif s.mode == modes.MISSION_MODE[s.flavour]:
             self._auto.update()
 
     def after_motion(self, dt: float) -> None:

@@ -75,7 +75,7 @@ class ModeCommands:
             return s.refused
         if name == s.mode:
             return mav.MAV_RESULT_ACCEPTED
-        if name == "AUTO" and (refusal := self._auto.start()) is not None:
+        if name == modes.MISSION_MODE[s.flavour] and (refusal := self._auto.start()) is not None:
             return refusal
         s.mode = name
         s.velocity_deadline = None
