@@ -105,8 +105,11 @@ class Mission:
 
     @property
     def core(self) -> MissionCore:
-        """What the mission core needs of this mission (the pipeline's settings)."""
-        return MissionCore(tuple(self.vehicles), self.map_server, self.depth, self.decide, self.sim.camera,
+        """What the mission core needs of this mission (the pipeline's settings); ``depth.pairs = "auto"``
+        becomes ``survey`` for a photo folder, else ``video``."""
+        depth = self.depth if self.depth.pairs != "auto" else dataclasses.replace(
+            self.depth, pairs="survey" if self.camera.plays_photos else "video")
+        return MissionCore(tuple(self.vehicles), self.map_server, depth, self.decide, self.sim.camera,
                            self.sim.frame_rate_hz, self.camera.gimbal, geofence_for(self))
 
     def mavlink_url(self, vehicle: str) -> str:

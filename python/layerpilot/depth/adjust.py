@@ -19,6 +19,7 @@ votes before the adjustment starts.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from typing import Sequence
 
@@ -91,6 +92,10 @@ class BundleAdjuster:
         self.config = config
         self.refiner = refiner
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})  # KD-tree
+        # (id(a), id(b)) -> (a, b, link): a live flight adjusts overlapping windows, each photo pair is
+        # verified once; holding the frames keeps their ids from being reused. 0 = no cache.
+        self._links: OrderedDict[tuple[int, int], tuple[CameraFrame, CameraFrame, PairLink | None]] = OrderedDict()
+        self.link_cache = 0
 
     def match_indices(self, a: CameraFrame, b: CameraFrame) -> tuple[np.ndarray, np.ndarray]:
         """Keypoint indices of the ratio-test matches of two photos (approximate nearest neighbours)."""
@@ -126,6 +131,17 @@ class BundleAdjuster:
             link = self._verify(a, b, i, j, ia[near], ib[near], len(ia))
         return link
 
+    def _cached_link(self, frames: Sequence[CameraFrame], i: int, j: int) -> PairLink | None:
+        if not self.link_cache:
+            return self.link(frames[i], frames[j], i, j)
+        key = (id(frames[i]), id(frames[j]))
+        if key not in self._links:
+            self._links[key] = (frames[i], frames[j], self.link(frames[i], frames[j], i, j))
+            while len(self._links) > self.link_cache:
+                self._links.popitem(last=False)
+        link = self._links[key][2]
+        return None if link is None else replace(link, i=i, j=j)
+
     def _verify(self, a: CameraFrame, b: CameraFrame, i: int, j: int, ia: np.ndarray, ib: np.ndarray,
                 matches: int) -> PairLink | None:
         c = self.config
@@ -147,7 +163,7 @@ class BundleAdjuster:
     def adjust(self, frames: Sequence[CameraFrame]) -> Adjustment:
         """Adjusted copies of ``frames``; photos without a verified pair are ``None``."""
         n = len(frames)
-        links = [lk for i, j in self.candidate_pairs(frames) if (lk := self.link(frames[i], frames[j], i, j))]
+        links = [lk for i, j in self.candidate_pairs(frames) if (lk := self._cached_link(frames, i, j))]
         votes = np.zeros((n, 2))
         for lk in links:
             w = len(lk.kp_i)

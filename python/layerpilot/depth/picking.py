@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections import Counter, deque
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterable
 
 import cv2
 import numpy as np
@@ -89,14 +89,21 @@ class FramePicker:
         return altitude_scene_depth(frame, self.config.ground_z, self.config.max_depth)
 
     def push(self, frame: CameraFrame) -> PickResult:
-        """Add ``frame`` and return its partner (or the reason there is none)."""
+        """Add ``frame`` and return its partner from the history (or the reason there is none)."""
+        result = self.pick(frame, self._history)
+        if result.reason != "blurry":
+            self._history.append(frame)
+        return result
+
+    def pick(self, frame: CameraFrame, candidates: Iterable[CameraFrame]) -> PickResult:
+        """``frame``'s partner among ``candidates`` (oldest first; ties go to the most recent), counted."""
         cfg = self.config
         depth = self.scene_depth(frame)
         if sharpness(frame.image) < cfg.min_sharpness:
             return self._skip("blurry", depth)
         best: tuple[float, CameraFrame, float] | None = None
         failure, failure_stage = "no_history", -1
-        for cand in reversed(self._history):
+        for cand in reversed(list(candidates)):
             stage, reason, ratio = self._check(frame, cand, depth)
             if reason == "ok":
                 score = abs(ratio - cfg.target_baseline_ratio)
@@ -104,7 +111,6 @@ class FramePicker:
                     best = (score, cand, ratio)
             elif stage > failure_stage:
                 failure, failure_stage = reason, stage
-        self._history.append(frame)
         if best is None:
             return self._skip(failure, depth)
         self.pairs += 1

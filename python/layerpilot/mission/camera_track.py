@@ -15,6 +15,7 @@ import bisect
 import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -53,6 +54,11 @@ class CameraSettings:
         check_range("camera.play_rate", self.play_rate, 0.01, 1000.0)
         check_range("camera.reconnect_max", self.reconnect_max, 0.1, 20.0)  # under the stall limit
         check_range("camera.history", self.history, 1.0, 3600.0)
+
+    @property
+    def plays_photos(self) -> bool:
+        """The source is a folder of photos (or a project folder holding ``images/``), played as the camera."""
+        return self.source != "sim" and Path(self.source).is_dir()
 
     @property
     def mount(self) -> Pose:

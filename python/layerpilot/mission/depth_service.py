@@ -18,12 +18,31 @@ from typing import Literal
 
 from layerpilot.config import check_range
 from layerpilot.depth.config import DepthConfig, preset_for
-from layerpilot.depth.downscale import processing_intrinsics
+from layerpilot.depth.downscale import limit_pixels, processing_intrinsics
 from layerpilot.depth.height_registration import HeightRegistration
 from layerpilot.depth.live import LiveConfig, LiveRefiner
 from layerpilot.depth.window import WindowConfig
 from layerpilot.geometry import CameraFrame, PointCloud, Pose
 from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth
+from layerpilot.photos import PhotoConfig, PhotoStereo
+
+
+class SurveyDepth:
+    """Survey photos as they arrive: each one bundle-adjusted with the photos that overlap it most, then
+    matched with its partner (``PhotoStereo.push``, the pipeline of ``layerpilot map images``);
+    ``refine = false``: the photos' poses as reported."""
+
+    def __init__(self, refine: bool = True, config: PhotoConfig = PhotoConfig()) -> None:
+        self.stereo = PhotoStereo(dataclasses.replace(config, poses="adjusted" if refine else "raw"))
+        self.pairs = 0
+
+    def push(self, frame: CameraFrame) -> PointCloud | None:
+        result = self.stereo.push(limit_pixels(frame, self.stereo.config.width))
+        self.pairs += result is not None
+        return None if result is None else result.cloud
+
+    def stats(self) -> dict[str, float]:
+        return {"pairs": self.pairs, **{f"skipped_{k}": v for k, v in sorted(self.stereo.skipped.items())}}
 
 
 @dataclass(frozen=True)
@@ -31,6 +50,8 @@ class DepthServiceConfig:
     """The ``[depth]`` table of a mission file."""
 
     source: Literal["stereo", "ground_truth"] = "stereo"
+    pairs: Literal["auto", "video", "survey"] = "auto"  # stereo: frames a second apart, or survey photos
+    # (60-70 % overlap, ``photos.PhotoConfig``: windows of photos bundle-adjusted); auto: survey for a photo folder
     max_depth: float = 100.0  # m: ground-truth pixels beyond are dropped; the map's max range for the clouds
     stride: int = 2  # ground truth: every stride-th pixel in each direction
     queue_size: int = 4  # frames waiting in the live node; the oldest is dropped beyond
@@ -72,10 +93,11 @@ class DepthService:
 
     def __init__(self, cfg: DepthServiceConfig, gimbal: bool = True) -> None:
         self.cfg = cfg
-        self.source: DepthSource | None = (GroundTruthDepth(cfg.max_depth, cfg.stride)
-                                           if cfg.source == "ground_truth" else None)
-        self.refiner = LiveRefiner(cfg.live(gimbal)) if cfg.source == "stereo" and cfg.refine else None
-        self.height = HeightRegistration() if cfg.source == "stereo" and cfg.register_height else None
+        video = cfg.source == "stereo" and cfg.pairs != "survey"
+        self.source: DepthSource | None = (GroundTruthDepth(cfg.max_depth, cfg.stride) if cfg.source == "ground_truth"
+                                           else SurveyDepth(cfg.refine) if not video else None)
+        self.refiner = LiveRefiner(cfg.live(gimbal)) if video and cfg.refine else None
+        self.height = HeightRegistration() if video and cfg.register_height else None
         self.frames = 0
         self.clouds = 0
         self._reported: list[tuple[float, Pose]] = []  # without refinement: the poses the clouds were placed with

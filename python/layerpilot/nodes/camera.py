@@ -47,7 +47,7 @@ def source_kind(source: str) -> str:
         return "device"
     if "://" in source:
         return "stream"
-    return "photos" if Path(source).is_dir() else "file"
+    return "photos" if CameraSettings(source=source).plays_photos else "file"
 
 
 class CameraNode:

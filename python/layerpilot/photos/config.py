@@ -28,9 +28,13 @@ class PhotoConfig:
         scale=0.5, num_disparities=240, block_size=9, uniqueness_ratio=5, speckle_window=50, speckle_range=16,
         max_disparity_step=0.0, min_depth=5.0, max_depth=100.0))
     resolution: float = 0.5  # voxel size of the map, metres
+    window: int = 10  # live: photos adjusted with each new one (the nearest to it, itself included)
+    kept: int = 48  # live: photos held to choose them from (memory: about 6 MB each at 1000 px)
 
     def __post_init__(self) -> None:
         check_range("width", self.width, 64)
         if self.poses not in POSES:
             raise ValueError(f"poses: {self.poses!r} is not one of {', '.join(POSES)}")
         check_range("resolution", self.resolution, 0.01)
+        check_range("window", self.window, 2)
+        check_range("kept", self.kept, self.window)

@@ -9,7 +9,8 @@ adjustment of all photos (``depth.adjust``, the default) or the per-pair refinem
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import Counter, deque
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -63,6 +64,8 @@ class PhotoStereo:
         self.adjuster = BundleAdjuster(config.adjustment, self.refiner)
         self.adjustment: Adjustment | None = None  # the last run's, with adjusted poses
         self.matcher = StereoMatcher(config.match)
+        self._kept: deque[CameraFrame] = deque(maxlen=config.kept)  # live: the flight's recent photos
+        self.skipped: Counter[str] = Counter()  # live: why a photo gave no pair
 
     def picks(self, frames: Sequence[CameraFrame | None]) -> list[tuple[int, PickResult]]:
         """(photo index, pick) for every photo the picker found a partner for (None: a photo left out)."""
@@ -86,6 +89,34 @@ class PhotoStereo:
         cloud, disp = self.matcher.cloud(ref, partner)
         return PairResult(i, j, pick.baseline_ratio, refinement, cloud, overlap_coverage(disp, pick.scene_depth),
                           reason)
+
+    def push(self, frame: CameraFrame) -> PairResult | None:
+        """Live: the newest photo's pair (None: no partner, the reason counted in ``skipped``).
+
+        The photos nearest the new one (``config.window``, itself included, from the ``config.kept``
+        latest) are adjusted together first, as ``run`` adjusts the whole flight: a photo of the
+        previous line that overlaps it ties it to the block. Each photo pair is verified once."""
+        self._kept.append(frame)
+        near = np.linalg.norm([f.pose.position[:2] - frame.pose.position[:2] for f in self._kept], axis=1)
+        chosen = sorted(np.argsort(near, kind="stable")[:self.config.window])  # flight order, the new photo last
+        frames = [replace(self._kept[k], stamp=float(n)) for n, k in enumerate(chosen)]  # stamp = window index
+        if self.config.poses == "adjusted":
+            self.refiner.cache_size = max(self.refiner.cache_size, self.config.kept)
+            self.adjuster.link_cache = self.config.kept * self.config.window
+            frames = self.adjuster.adjust([self._kept[k] for k in chosen]).frames
+            frames = [None if f is None else replace(f, stamp=float(n)) for n, f in enumerate(frames)]
+        if frames[-1] is None:
+            self.skipped["not_adjusted"] += 1
+            return None
+        pick = self.picker.pick(frames[-1], [f for f in frames[:-1] if f is not None])
+        if pick.partner is None:
+            self.skipped[pick.reason] += 1
+            return None
+        result = self.pair(frames, len(frames) - 1, pick)
+        if result.cloud is None:
+            self.skipped[result.reason] += 1
+            return result
+        return replace(result, cloud=replace(result.cloud, stamp=frame.stamp))
 
     def run(self, frames: Sequence[CameraFrame], progress: Callable[[int, int], None] | None = None
             ) -> list[PairResult]:
