@@ -65,3 +65,16 @@ def test_every_mission_key_is_in_the_documented_table() -> None:
     doc = (Path(__file__).resolve().parents[1] / "docs" / "missions.md").read_text()
     missing = [k for k in _keys(Mission) if f"| `{k}` |" not in doc]
     assert not missing, f"docs/missions.md lacks {missing}"
+
+
+def test_demo_and_study_choose_the_sensor_profile_by_flag() -> None:
+    from layerpilot.cli import build_parser
+    from layerpilot.cli.eval import _mission
+
+    for command in ("demo", "study"):
+        args = build_parser().parse_args([command, "--config", "consumer", "--sensors", "rtk"])
+        mission = _mission(args)
+        assert mission.sim.sensors == "rtk" and mission.sim.sensor_overrides == load_mission("consumer").sim.sensor_overrides
+    args = build_parser().parse_args(["demo", "--sensors", "lidar"])
+    with pytest.raises(ConfigError, match=r"^--sensors 'lidar': expected one of 'perfect', 'rtk', 'consumer', 'degraded'"):
+        _mission(args)

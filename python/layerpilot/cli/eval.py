@@ -11,7 +11,7 @@ from pathlib import Path
 # option dest -> the mission key it overrides (a flag that is not given leaves the file's value)
 EVAL_FLAGS = {"behavior": "decide.behavior", "seed": "decide.seed", "duration": "evaluation.duration",
               "world_seed": "sim.world.seed", "world_size": "sim.world.size", "pitch": "sim.camera.pitch_deg",
-              "frame_rate": "sim.frame_rate_hz", "depth": "depth.source", "out": "evaluation.out",
+              "frame_rate": "sim.frame_rate_hz", "depth": "depth.source", "sensors": "sim.sensors", "out": "evaluation.out",
               "seeds": "evaluation.seeds", "behaviors": "evaluation.behaviors"}
 
 
@@ -49,6 +49,8 @@ def _mission_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth", type=lambda v: "ground_truth" if v == "truth" else v,  # "truth": its old name
                    choices=["stereo", "ground_truth"],
                    help="mission map from two-view stereo or from the renderer's depth (depth.source)")
+    p.add_argument("--sensors", help="the simulated drone's sensor profile: perfect, rtk, consumer or degraded "
+                   "(sim.sensors, docs/sim.md)")
     p.add_argument("--out", help="parent directory of the run directory (evaluation.out)")
 
 
