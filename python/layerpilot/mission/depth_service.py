@@ -7,7 +7,8 @@ Stereo refines the poses of its pairs from the images first (``refine``, on by d
 ``depth.live``): a real drone's reported poses are too coarse for two-view stereo; each cloud's height
 is then fitted to the flight's earlier clouds (``register_height``, ``depth.height_registration``). The vehicle's
 telemetry pose stream (``push_pose``) lets it learn the camera clock's offset and read the
-priors at the exposure time.
+priors at the exposure time. Survey photos (``depth.pairs = "survey"``, a photo folder played as the
+camera) go through the photo pipeline instead: each bundle-adjusted with its nearest photos as it arrives.
 """
 
 from __future__ import annotations

@@ -99,12 +99,12 @@ class PhotoStereo:
         self._kept.append(frame)
         near = np.linalg.norm([f.pose.position[:2] - frame.pose.position[:2] for f in self._kept], axis=1)
         chosen = sorted(np.argsort(near, kind="stable")[:self.config.window])  # flight order, the new photo last
-        frames = [replace(self._kept[k], stamp=float(n)) for n, k in enumerate(chosen)]  # stamp = window index
+        window: Sequence[CameraFrame | None] = [self._kept[k] for k in chosen]
         if self.config.poses == "adjusted":
             self.refiner.cache_size = max(self.refiner.cache_size, self.config.kept)
             self.adjuster.link_cache = self.config.kept * self.config.window
-            frames = self.adjuster.adjust([self._kept[k] for k in chosen]).frames
-            frames = [None if f is None else replace(f, stamp=float(n)) for n, f in enumerate(frames)]
+            window = self.adjuster.adjust(window).frames
+        frames = [None if f is None else replace(f, stamp=float(n)) for n, f in enumerate(window)]  # stamp = index
         if frames[-1] is None:
             self.skipped["not_adjusted"] += 1
             return None
