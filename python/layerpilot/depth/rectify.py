@@ -39,26 +39,43 @@ class RectifiedPair:
     cy: float
     baseline: float  # metres
     to_camera: np.ndarray  # (3, 3) reference camera <- canonical rectified camera
-    source_index: np.ndarray  # int32 (H, W): canonical pixel -> flat index of the nearest reference image pixel
+    colors: np.ndarray  # uint8 (H, W, 3): the reference image's colour at each canonical pixel (nearest)
     vertical: bool  # stereoRectify chose a vertical pair
     mirrored: bool
 
 
-def _scaled(frame: CameraFrame, scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _grey(frame: CameraFrame, scale: float) -> np.ndarray:
     grey = cv2.cvtColor(frame.image, cv2.COLOR_RGB2GRAY)
+    return grey if scale == 1.0 else cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+
+
+def _intrinsics(frame: CameraFrame, scale: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """K and image size (w, h) at ``scale`` (cv2.resize's size for ``fx = fy = scale``: rounded half to even)."""
     if scale == 1.0:
-        return grey, frame.intrinsics.K
-    grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    return grey, frame.intrinsics.scaled(scale).K  # pixel centres, not corners, keep their place
+        return frame.intrinsics.K, frame.size
+    w, h = frame.size
+    return frame.intrinsics.scaled(scale).K, (round(w * scale), round(h * scale))  # pixel centres keep their place
+
+
+def _view(frame: CameraFrame, scale: float, K: np.ndarray, R: np.ndarray, P: np.ndarray, size: tuple[int, int],
+          colors: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """One view in the rectified layout: its grey image, its valid mask (uint8, 255 = inside the frame) and,
+    if ``colors``, the frame's colour at the nearest full-resolution pixel."""
+    mx, my = cv2.initUndistortRectifyMap(K, None, R, P, size, cv2.CV_32FC1)
+    grey = cv2.remap(_grey(frame, scale), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    valid = cv2.inRange(mx, 0, size[0] - 1) & cv2.inRange(my, 0, size[1] - 1)
+    # remap's nearest rounds half to even and its replicated border clamps, as rint and clip would
+    rgb = cv2.remap(frame.image, (mx + 0.5) / scale - 0.5, (my + 0.5) / scale - 0.5, cv2.INTER_NEAREST,
+                    borderMode=cv2.BORDER_REPLICATE) if colors else None
+    return grey, valid, rgb
 
 
 def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> RectifiedPair:
     """Rectify ``ref`` (the frame whose view the points will come from) against ``other``."""
     if ref.size != other.size:
         raise ValueError(f"other: image size {other.size} differs from ref {ref.size}")
-    grey_r, K_r = _scaled(ref, scale)
-    grey_o, K_o = _scaled(other, scale)
-    size = (grey_r.shape[1], grey_r.shape[0])
+    K_r, size = _intrinsics(ref, scale)
+    K_o, _ = _intrinsics(other, scale)
     R = other.pose.rotation.T @ ref.pose.rotation  # x_other = R x_ref + T
     T = other.pose.rotation.T @ (ref.pose.position - other.pose.position)
     if np.linalg.norm(T) < 1e-9:
@@ -72,18 +89,8 @@ def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> Rectifi
     axis = 1 if vertical else 0
     other_pos = -P2[axis, 3] / P2[axis, axis]  # partner centre along the rectified baseline axis
     mirrored = other_pos < 0
-    maps = []
-    for K, Rr, P in ((K_r, R1, P1), (K_o, R2, P2)):
-        mx, my = cv2.initUndistortRectifyMap(K, None, Rr, P, size, cv2.CV_32FC1)
-        if vertical:
-            mx, my = mx.T, my.T
-        if mirrored:
-            mx, my = mx[:, ::-1], my[:, ::-1]
-        maps.append((np.ascontiguousarray(mx), np.ascontiguousarray(my)))
-    (lx, ly), (rx, ry) = maps
-    left = cv2.remap(grey_r, lx, ly, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    right = cv2.remap(grey_o, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    w, h = size
+    left, left_valid, colors = (_canonical(a, vertical, mirrored) for a in _view(ref, scale, K_r, R1, P1, size, True))
+    right, right_valid = (_canonical(a, vertical, mirrored) for a in _view(other, scale, K_o, R2, P2, size, False)[:2])
     f, cx, cy = float(P1[0, 0]), float(P1[0, 2]), float(P1[1, 2])
     M = np.eye(3)
     if vertical:
@@ -94,18 +101,18 @@ def rectify(ref: CameraFrame, other: CameraFrame, scale: float = 1.0) -> Rectifi
         M = np.diag([-1.0, 1.0, 1.0]) @ M
     # canonical point p_c = M @ p_rect and p_rect = R1 @ p_ref
     to_camera = R1.T @ M.T
-    hh, ww = ref.image.shape[:2]  # full resolution
-    px = np.clip(np.rint((lx + 0.5) / scale - 0.5), 0, ww - 1).astype(np.int32)
-    py = np.clip(np.rint((ly + 0.5) / scale - 0.5), 0, hh - 1).astype(np.int32)
-    return RectifiedPair(left, right, _inside(lx, ly, w, h), _inside(rx, ry, w, h), f, cx, cy,
-                         float(abs(other_pos)), to_camera, py * np.int32(ww) + px, vertical, mirrored)
+    return RectifiedPair(left, right, left_valid > 0, right_valid > 0, f, cx, cy, float(abs(other_pos)), to_camera,
+                         colors, vertical, mirrored)
+
+
+def _canonical(image: np.ndarray, vertical: bool, mirrored: bool) -> np.ndarray:
+    """A rectified image in the canonical layout: remapping first and transposing / mirroring the result
+    is per pixel the same as remapping with transposed / mirrored maps, without copying the float maps."""
+    image = cv2.transpose(image) if vertical else image
+    return cv2.flip(image, 1) if mirrored else image
 
 
 def _zoomed(P: np.ndarray, s: float, size: tuple[int, int]) -> np.ndarray:
     """Projection matrix ``P`` with its focal length scaled by ``s`` about the image centre."""
     cx, cy = (size[0] - 1) / 2, (size[1] - 1) / 2
     return np.array([[s, 0.0, (1 - s) * cx], [0.0, s, (1 - s) * cy], [0.0, 0.0, 1.0]]) @ P
-
-
-def _inside(mx: np.ndarray, my: np.ndarray, w: int, h: int) -> np.ndarray:
-    return (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)

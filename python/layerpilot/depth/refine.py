@@ -130,8 +130,10 @@ class PoseRefiner:
             return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32), np.zeros(0, int)
         lk = dict(winSize=(15, 15), maxLevel=3, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03))
         fwd, st, _ = cv2.calcOpticalFlowPyrLK(g_other, g_ref, start, None, **lk)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(g_ref, g_other, fwd, None, **lk)
-        ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - start, axis=1) < 0.5)
+        ok = st.ravel() == 1
+        if ok.any():  # back only what the forward pass found (LK tracks each point on its own; a lost point costs most)
+            back, st2, _ = cv2.calcOpticalFlowPyrLK(g_ref, g_other, fwd[ok], None, **lk)
+            ok[ok] = (st2.ravel() == 1) & (np.linalg.norm(back - start[ok], axis=1) < 0.5)
         index = np.where(np.arange(len(start)) < len(seeds), np.arange(len(start)), -1)
         return _full(fwd[ok], c.scale), _full(start[ok], c.scale), index[ok]
 
@@ -216,34 +218,36 @@ def polish(K: np.ndarray, pa: np.ndarray, pb: np.ndarray, R: np.ndarray, t: np.n
     t = t / np.linalg.norm(t)
     h = 1e-6
     probes = np.vstack([np.zeros(5), h * np.eye(5)])  # the pose and a step along each of its 5 freedoms
+    turns = rotation_matrices(probes[:, :3])  # the probes' rotations do not depend on the pose
     for _ in range(iterations):
-        u = np.cross(t, [1.0, 0.0, 0.0] if abs(t[0]) < 0.9 else [0.0, 1.0, 0.0])
-        u /= np.linalg.norm(u)
-        basis = np.stack([u, np.cross(t, u)])
-        res = _sampson(xa, xb, *_moved(R, t, basis, probes)) * K[0, 0]  # (6, N)
+        basis = _tangent(t)
+        tt = t + probes[:, 3:] @ basis
+        res = _sampson(xa, xb, turns @ R, tt / np.sqrt((tt * tt).sum(1))[:, None]) * K[0, 0]  # (6, N)
         r0, J = res[0], (res[1:] - res[0]) / h  # J: (5, N)
         w = np.minimum(1.0, px / np.maximum(np.abs(r0), 1e-12))  # Huber's weights
         step = -np.linalg.solve((J * w) @ J.T + 1e-12 * np.eye(5), (J * w) @ r0)
-        Rs, ts = _moved(R, t, basis, step[None])
-        R, t = Rs[0], ts[0]
+        R = rotation_matrices(step[None, :3])[0] @ R
+        t = t + step[3:] @ basis
+        t = t / math.sqrt(t @ t)
         if np.abs(step).max() < 1e-7:
             break
     return R, t
 
 
-def _moved(R: np.ndarray, t: np.ndarray, basis: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R, t) for each row of ``p`` (k, 5): turned by the rotation vector p[:3], the baseline direction
-    tilted by p[3:] along the two ``basis`` vectors."""
-    tt = t + p[:, 3:] @ basis
-    return rotation_matrices(p[:, :3]) @ R, tt / np.linalg.norm(tt, axis=1, keepdims=True)
+def _tangent(t: np.ndarray) -> np.ndarray:
+    """Two unit vectors (2, 3) across the unit vector ``t``, the second ``t x`` the first."""
+    a = (1.0, 0.0, 0.0) if abs(t[0]) < 0.9 else (0.0, 1.0, 0.0)
+    u = np.array([t[1] * a[2] - t[2] * a[1], t[2] * a[0] - t[0] * a[2], t[0] * a[1] - t[1] * a[0]])
+    u /= math.sqrt(u @ u)
+    return np.array([u, [t[1] * u[2] - t[2] * u[1], t[2] * u[0] - t[0] * u[2], t[0] * u[1] - t[1] * u[0]]])
 
 
 def _sampson(xa: np.ndarray, xb: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Sampson distances (k, N) (normalised image units) of the correspondences xa <-> xb (N, 3) for
     each of k poses (R (k, 3, 3), t (k, 3)): E = [t]x R."""
     E = skew(t) @ R
-    Ex, Etx = np.einsum("kij,nj->kni", E, xa), np.einsum("kji,nj->kni", E, xb)
-    return (xb[None] * Ex).sum(2) / np.sqrt(Ex[..., 0] ** 2 + Ex[..., 1] ** 2 + Etx[..., 0] ** 2 + Etx[..., 1] ** 2)
+    Ex, Etx = xa @ E.transpose(0, 2, 1), xb @ E  # E xa and E^T xb, (k, N, 3)
+    return (xb * Ex).sum(2) / np.sqrt(Ex[..., 0] ** 2 + Ex[..., 1] ** 2 + Etx[..., 0] ** 2 + Etx[..., 1] ** 2)
 
 
 def essential_pose(pa: np.ndarray, pb: np.ndarray, K: np.ndarray, px: float

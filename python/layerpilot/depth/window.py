@@ -21,12 +21,12 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import csr_matrix
+from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import MatrixRankWarning, spsolve
 
 from layerpilot.config import check_range
 from layerpilot.depth.refine import Relative, rotation_matrices, skew
-from layerpilot.geometry import Pose
+from layerpilot.geometry import Pose, quat_from_matrix
 
 
 @dataclass(frozen=True)
@@ -118,42 +118,53 @@ class SlidingWindow:
         C = np.array([self.frames[s].pose.position for s in stamps])
         prior_R = np.array([self.frames[s].prior.rotation for s in stamps])
         prior_C = np.array([self.frames[s].prior.position for s in stamps])
+        edges = self._edge_terms()
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", MatrixRankWarning)
             for _ in range(iterations):
-                step = self._step(R, C, prior_R, prior_C, ref, other)
+                step = self._step(R, C, prior_R, prior_C, ref, other, edges)
                 if not np.isfinite(step).all():
                     return False
                 R, C = rotation_matrices(step[:, :3]) @ R, C + step[:, 3:]
                 if np.abs(step[:, :3]).max() < 1e-6 and np.abs(step[:, 3:]).max() < 1e-3:  # 0.00006 deg, 1 mm
                     break
         for s, Rk, Ck in zip(stamps, R, C):
-            self.frames[s].pose = Pose.from_rotation(Rk, Ck)  # products of exact rotations: orthonormal to rounding
+            # products of exact rotations: orthonormal to rounding, so Pose.from_rotation's checks are skipped
+            self.frames[s].pose = Pose(Ck, quat_from_matrix(Rk))
         return True
 
-    def _step(self, R: np.ndarray, C: np.ndarray, prior_R: np.ndarray, prior_C: np.ndarray, ref: np.ndarray,
-              other: np.ndarray) -> np.ndarray:
-        """One reweighted Gauss-Newton step (n, 6): rotation correction and centre shift per keyframe."""
-        c, n, m = self.config, len(R), len(self.edges)
-        ar = np.arange(m)
-        sig_rot, sig_dir = math.radians(c.rotation_sigma_deg), math.radians(c.direction_sigma_deg)
-        # rotation: log(R_meas^T Rj^T Ri) ~ err0 + R_meas^T Rj^T (w_i - w_j)
-        M = np.einsum("kba,kcb->kac", np.array([e.relative.R for e in self.edges]), R[other])
-        err0 = _log_small(M @ R[ref])
-        w = _huber(np.linalg.norm(err0, axis=1) / sig_rot, c.loss_scale) / sig_rot
-        A_rot = np.zeros((m, 3, n, 6))
-        A_rot[ar, :, ref, :3] = w[:, None, None] * M
-        A_rot[ar, :, other, :3] = -w[:, None, None] * M
-        r_rot = w[:, None] * err0
-        # baseline: a^T Rj^T (c_i - c_j) against the images' direction (across: target 0) and length (along)
+    def _edge_terms(self) -> tuple[np.ndarray, ...]:
+        """What the edges say, the same in every iteration: the images' relative rotations (m, 3, 3), the
+        baseline axes (m, 3 axes, 3: two across the images' direction, then along it), the measured lengths
+        (NaN: none) and the sigmas of the GNSS displacements (m, 3)."""
+        c = self.config
         t = np.array([e.relative.t for e in self.edges])
         helper = np.where((np.abs(t[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
         u = np.cross(t, helper)
         u /= np.linalg.norm(u, axis=1, keepdims=True)
-        axes = np.stack([u, np.cross(t, u), t], axis=1)  # (m, 3 axes, 3)
+        axes = np.stack([u, np.cross(t, u), t], axis=1)
+        dt = np.array([abs(e.ref - e.other) for e in self.edges])
+        sig_delta = np.sqrt(1.0 + dt)[:, None] * [c.delta_sigma_h, c.delta_sigma_h, c.delta_sigma_v]
+        return (np.array([e.relative.R for e in self.edges]), axes, np.array([e.length for e in self.edges]), sig_delta)
+
+    def _step(self, R: np.ndarray, C: np.ndarray, prior_R: np.ndarray, prior_C: np.ndarray, ref: np.ndarray,
+              other: np.ndarray, edges: tuple[np.ndarray, ...]) -> np.ndarray:
+        """One reweighted Gauss-Newton step (n, 6): rotation correction and centre shift per keyframe."""
+        c, n, m = self.config, len(R), len(self.edges)
+        rel_R, axes, measured, sig_delta = edges
+        sig_rot, sig_dir = math.radians(c.rotation_sigma_deg), math.radians(c.direction_sigma_deg)
+        # each edge's rows (rotation, baseline, displacement: 9) touch its two keyframes' 12 columns (ref's, other's)
+        J = np.zeros((m, 9, 12))
+        # rotation: log(R_meas^T Rj^T Ri) ~ err0 + R_meas^T Rj^T (w_i - w_j)
+        M = np.einsum("kba,kcb->kac", rel_R, R[other])
+        err0 = _log_small(M @ R[ref])
+        w = _huber(np.linalg.norm(err0, axis=1) / sig_rot, c.loss_scale) / sig_rot
+        J[:, 0:3, 0:3] = w[:, None, None] * M
+        J[:, 0:3, 6:9] = -w[:, None, None] * M
+        r_rot = w[:, None] * err0
+        # baseline: a^T Rj^T (c_i - c_j) against the images' direction (across: target 0) and length (along)
         b = C[ref] - C[other]
         d = np.einsum("kba,kb->ka", R[other], b)
-        measured = np.array([e.length for e in self.edges])
         has_length = np.isfinite(measured)
         length = np.where(has_length, measured, np.linalg.norm(d, axis=1))
         target = np.zeros((m, 3))
@@ -162,31 +173,36 @@ class SlidingWindow:
         r = np.einsum("kxa,ka->kx", axes, d) - target
         w = _huber(np.abs(r) / sigma, c.loss_scale) / sigma * np.stack([np.ones(m), np.ones(m), has_length], axis=1)
         g = np.einsum("kab,kxb->kxa", R[other], axes)  # Rj a, per axis
-        bx = skew(b)
-        A_base = np.zeros((m, 3, n, 6))
-        A_base[ar, :, ref, 3:] = w[:, :, None] * g
-        A_base[ar, :, other, 3:] = -w[:, :, None] * g
-        A_base[ar, :, other, :3] = w[:, :, None] * np.einsum("kxa,kab->kxb", g, bx)
+        J[:, 3:6, 3:6] = w[:, :, None] * g
+        J[:, 3:6, 9:12] = -w[:, :, None] * g
+        J[:, 3:6, 6:9] = w[:, :, None] * np.einsum("kxa,kab->kxb", g, skew(b))
         r_base = w * r
         # GNSS displacement: the pair's reported baseline, good to decimetres where the absolute fix is metres
         # off (the receiver's wandering error is common to both fixes)
-        dt = np.array([abs(e.ref - e.other) for e in self.edges])
-        sig_delta = np.sqrt(1.0 + dt)[:, None] * [c.delta_sigma_h, c.delta_sigma_h, c.delta_sigma_v]
         r_delta = (b - (prior_C[ref] - prior_C[other])) / sig_delta
         w = _huber(np.abs(r_delta), c.loss_scale) / sig_delta
-        A_delta = np.zeros((m, 3, n, 6))
-        A_delta[ar, :, ref, 3:] = w[:, :, None] * np.eye(3)
-        A_delta[ar, :, other, 3:] = -w[:, :, None] * np.eye(3)
+        J[:, 6:9, 3:6] = w[:, :, None] * np.eye(3)
+        J[:, 6:9, 9:12] = -w[:, :, None] * np.eye(3)
         r_delta = w * sig_delta * r_delta
-        # priors: attitude (map axes: tilt x, y and heading z) and GNSS position
+        # priors: attitude (map axes: tilt x, y and heading z) and GNSS position, one diagonal row per unknown
         sig = np.concatenate([np.radians([c.tilt_sigma_deg, c.tilt_sigma_deg, c.yaw_sigma_deg]),
                               [c.gnss_sigma_h, c.gnss_sigma_h, c.gnss_sigma_v]])
         r_prior = np.hstack([_log_small(np.einsum("nij,nkj->nik", R, prior_R)), C - prior_C]) / sig
-        A = np.vstack([A_rot.reshape(3 * m, 6 * n), A_base.reshape(3 * m, 6 * n), A_delta.reshape(3 * m, 6 * n),
-                       np.diag(np.tile(1.0 / sig, n))])
-        res = np.concatenate([r_rot.ravel(), r_base.ravel(), r_delta.ravel(), r_prior.ravel()])
-        A = csr_matrix(A)  # block-sparse; a sparse solve also stays off the BLAS thread pool, slow on a busy machine
-        return spsolve((A.T @ A).tocsc(), -(A.T @ res)).reshape(n, 6)  # the priors keep A^T A well conditioned
+        # normal equations A^T A x = -A^T r, summed edge by edge (12 x 12 blocks) without a BLAS call
+        res = np.concatenate([r_rot, r_base, r_delta], axis=1)  # (m, 9)
+        JtJ = np.einsum("kai,kaj->kij", J, J).reshape(m, 2, 6, 2, 6)
+        Jtr = np.einsum("kai,ka->ki", J, res).reshape(m, 2, 6)
+        N = np.zeros((n, n, 6, 6))
+        rhs = (r_prior / sig).ravel()
+        ends = (ref, other)
+        for a in range(2):
+            np.add.at(rhs.reshape(n, 6), ends[a], Jtr[:, a])
+            for e in range(2):
+                np.add.at(N, (ends[a], ends[e]), JtJ[:, a, :, e])
+        N = N.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
+        N[np.diag_indices_from(N)] += np.tile(1.0 / sig ** 2, n)
+        # block-sparse; a sparse solve also stays off the BLAS thread pool, slow on a busy machine
+        return spsolve(csc_matrix(N), -rhs).reshape(n, 6)  # the priors keep A^T A well conditioned
 
 
 def _huber(r: np.ndarray | float, scale: float) -> np.ndarray | float:
