@@ -93,10 +93,10 @@ def _weaving_flight(t: np.ndarray, start=(-60.0, 40.0), speed: float = 5.0, ampl
     return xy, heading
 
 
-def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0):
+def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0, lead: float = 1.0):
     """Events of the weaving flight with a camera clock ``offset`` seconds behind the telemetry:
-    ("pose", stamp, body pose) at ``rate`` Hz, running a second ahead of ("frame", CameraFrame) at 1 Hz,
-    each frame stamped on the camera's clock and carrying the telemetry's pose at that stamp."""
+    ("pose", stamp, body pose) at ``rate`` Hz, running ``lead`` seconds ahead of ("frame", CameraFrame)
+    at 1 Hz, each frame stamped on the camera's clock and carrying the telemetry's pose at that stamp."""
     t = np.arange(0.0, frames + 2.0, 1.0 / rate)
     xy, heading = _weaving_flight(t)
     altitude = float(world.terrain_height(*xy[0])) + 45.0
@@ -105,7 +105,7 @@ def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0):
     with Renderer(world, CameraConfig(width=SIZE[0], height=SIZE[1], pitch_deg=60.0)) as r:
         for k in range(1, frames):
             exposure = float(k)  # on the telemetry's clock
-            while sent < len(t) and t[sent] <= exposure + 1.0:
+            while sent < len(t) and t[sent] <= exposure + lead:
                 yield "pose", float(t[sent]), body[sent]
                 sent += 1
             i = int(round(exposure * rate))
@@ -135,6 +135,23 @@ def test_time_offset_estimate_converges_to_the_simulated_offset(world):
     assert stats["time_offset_s"] == pytest.approx(offset, abs=0.02), stats
     trajectory = service.trajectory()
     assert len(trajectory) >= 15 and all(s2 > s1 for (s1, _), (s2, _) in zip(trajectory, trajectory[1:]))
+
+
+def test_a_frame_the_telemetry_has_not_yet_reached_is_placed_on_the_telemetry_clock(world):
+    """The telemetry arrives 50 ms behind the frames' exposures: once the offset is known, a frame is
+    still placed at its exposure (the stream's last velocity carried on), not at its camera stamp (0.6 m
+    back at 5 m/s), so the two frames of a pair are never placed on different clocks."""
+    offset = 0.12
+    service = DepthService(DepthServiceConfig())
+    for kind, *event in _offset_flight(world, offset, lead=-0.05):
+        service.push_pose(*event) if kind == "pose" else service.push(event[0])
+    assert service.stats()["time_offset_s"] == pytest.approx(offset, abs=0.02)
+    t = np.arange(0.0, 26.0, 1.0 / 20.0)
+    xy, _ = _weaving_flight(t)
+    keyframes = list(service.refiner.window.frames.values())
+    assert len(keyframes) >= 8
+    errors = [np.linalg.norm(k.prior.position[:2] - xy[int(round((k.stamp + offset) * 20.0))]) for k in keyframes]
+    assert max(errors) < 0.15, errors  # the raw stamp's pose would be 0.6 m off
 
 
 def test_the_depth_node_hears_the_pose_stream_and_reports_the_refinement(world):

@@ -58,8 +58,12 @@ class PoseHistory:
         """The stream's rotations at ``times`` (all inside it: check ``covers`` first)."""
         return Slerp(self.stamps, Rotation.from_matrix([p.rotation for p in self.poses]))(times)
 
-    def at(self, t: float) -> Pose | None:
-        """The pose at ``t``, or None outside the stream or in a gap."""
+    def at(self, t: float, ahead: float = 0.0) -> Pose | None:
+        """The pose at ``t``, or None outside the stream or in a gap. Up to ``ahead`` seconds past the
+        newest sample the position goes on at the last velocity and the rotation stays the last one:
+        a frame stamped just after the telemetry's newest pose is still placed on the telemetry's clock."""
+        if self.stamps and self.stamps[-1] < t <= self.stamps[-1] + ahead:
+            return self._extrapolated(t)
         if not self.covers(t, t):
             return None
         i = bisect.bisect_left(self.stamps, t)
@@ -70,6 +74,13 @@ class PoseHistory:
         a, b = self.poses[i - 1], self.poses[i]
         R = Slerp([0.0, 1.0], Rotation.from_matrix([a.rotation, b.rotation]))([s]).as_matrix()[0]
         return Pose.from_rotation(R, a.position + s * (b.position - a.position))
+
+    def _extrapolated(self, t: float) -> Pose:
+        last = self.poses[-1]
+        if len(self.stamps) < 2 or self.stamps[-1] - self.stamps[-2] > self.max_gap:
+            return last
+        velocity = (last.position - self.poses[-2].position) / (self.stamps[-1] - self.stamps[-2])
+        return Pose(last.position + velocity * (t - self.stamps[-1]), last.orientation)
 
 
 class TimeOffset:

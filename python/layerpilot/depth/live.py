@@ -102,10 +102,22 @@ class LiveRefiner:
         return self.offset.estimate
 
     def prior(self, frame: CameraFrame) -> Pose:
-        """The frame's reported pose, re-read from the telemetry at stamp + offset once the offset is known."""
-        if (dt := self.time_offset) is not None and (pose := self.cameras.at(frame.stamp + dt)) is not None:
+        """The frame's reported pose, re-read from the telemetry at stamp + offset once the offset is known
+        (a little past the newest telemetry pose by extrapolation, so that the two frames of a pair are
+        never placed on different clocks)."""
+        if (dt := self.time_offset) is not None and (
+                pose := self.cameras.at(frame.stamp + dt, ahead=self.config.max_offset)) is not None:
             return pose
         return frame.pose
+
+    def _reread_priors(self) -> None:
+        """Every keyframe's prior re-read from the telemetry at the current offset: the frames placed
+        before the offset was known (or before the telemetry reached them) join the same clock."""
+        if (dt := self.time_offset) is None:
+            return
+        for kf in self.window.frames.values():
+            if (pose := self.cameras.at(kf.stamp + dt, ahead=self.config.max_offset)) is not None:
+                kf.prior = pose
 
     def refine(self, frame: CameraFrame, partner: CameraFrame) -> tuple[CameraFrame, CameraFrame] | None:
         """The pair with refined poses (``frame`` is the newer, its points are published), or None
@@ -129,6 +141,9 @@ class LiveRefiner:
         self.offset.add(frame.stamp, partner.stamp, rel.R)
         if self.mount is not None:
             self.offset.update(self.cameras)
+        self._reread_priors()
+        prior_f = self.prior(frame)
+        prior_o = other.prior if other is not None else self.prior(partner)
         gnss = float(np.linalg.norm(prior_f.position - prior_o.position))
         points = triangulate(frame.K, rel)  # unit baseline, the new frame's axes
         length = self._transfer(other, rel, points) if other is not None else math.nan
