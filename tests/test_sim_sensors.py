@@ -104,6 +104,34 @@ def test_same_seed_same_errors_other_seed_other_errors():
     assert not np.allclose(ea, ec)
 
 
+def test_restarted_errors_do_not_depend_on_the_steps_before():
+    """A lock-step mission restarts the errors at its clock's 0: a take-off of any length, the same errors after."""
+    from layerpilot.sim.estimate import Estimator
+
+    def after_restart(steps_before: int) -> list[np.ndarray]:
+        vehicle = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 30.0)), "tcp:127.0.0.1:0",
+                                 EndpointConfig(sensors=CONSUMER, seed=3))
+        for _ in range(steps_before):
+            vehicle.step(0.05)
+        vehicle.restart_errors()
+        errors = []
+        for _ in range(40):
+            vehicle.step(0.05)
+            e = vehicle.estimator.errors.current
+            errors.append(np.array([*e.position, *e.drift, e.roll, e.pitch, e.yaw]))
+        return errors
+
+    a = after_restart(7)
+    assert np.array_equal(a, after_restart(300))
+    fresh = Estimator(CONSUMER, 3)  # the same errors as a flight that starts with the mission's clock
+    first = []
+    for _ in range(40):
+        fresh.errors.step(0.05)
+        first.append(np.array([*fresh.errors.current.position, *fresh.errors.current.drift, fresh.errors.current.roll,
+                               fresh.errors.current.pitch, fresh.errors.current.yaw]))
+    assert np.array_equal(a, first)
+
+
 def test_clock_offset_and_jitter_of_the_stamps():
     """stamp - exposure = -offset + N(0, jitter) - U(0, trigger): mean -110 ms, std 11.5 ms for consumer."""
     camera = CameraErrors(CONSUMER, SMALL.intrinsics, seed=0)

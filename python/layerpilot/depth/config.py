@@ -77,7 +77,7 @@ class MatchConfig:
 
 @dataclass(frozen=True)
 class RefineConfig:
-    """Relative pose from the images (see docs/photos.md, "Pose refinement", and docs/depth.md, "Pose refinement")."""
+    """Relative pose from the images (see docs/photos.md, "Per-pair refinement", and docs/depth.md, "Pose refinement")."""
 
     detector: str = "sift"  # "sift": keypoints matched by descriptor; "klt": corners of the partner tracked by optical flow
     scale: float = 1.0  # images are resized by this before features are found (pixels come back at full size)

@@ -225,6 +225,7 @@ class LockstepMission:
         origin = np.asarray(sim.endpoint.ekf_origin, float)  # the map frame's origin in the world
         home = mission.decide.home
         hover = np.array([home[0], home[1], altitude])
+        sim.endpoint.restart_errors()  # the mission's sensor errors must not depend on how long the take-off took
         link.set_waypoint(*hover, yaw=0.0)
         sim.endpoint.step(ev.step_s)
         v = sim.vehicle

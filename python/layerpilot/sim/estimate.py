@@ -34,9 +34,17 @@ class Estimator:
     """What the EKF reports: each step the true state plus that step's error, kept for ``HISTORY_S``."""
 
     def __init__(self, profile: SensorProfile, seed: int) -> None:
+        self._profile, self._seed = profile, seed
         self.errors = PoseErrors(profile, np.random.default_rng([seed, 1]))
         self._exact = profile.exact_pose
         self._history: deque[VehiclePose] = deque()
+
+    def restart(self, truth: VehiclePose) -> None:
+        """The errors from their seed again and the history from ``truth`` on: a lock-step mission's clock
+        starts after a wall-paced take-off of varying length, and its errors must not depend on it."""
+        self.errors = PoseErrors(self._profile, np.random.default_rng([self._seed, 1]))
+        self._history.clear()
+        self._history.append(truth if self._exact else self.report(truth))
 
     def step(self, dt: float, truth: VehiclePose) -> None:
         if not self._exact:  # exact: the errors stay zero; only the history is kept (a camera stamp's look-up)

@@ -148,6 +148,12 @@ class MavlinkVehicle:
         with self._lock:
             return self.state.reported_pose()
 
+    def restart_errors(self) -> None:
+        """The sensors' errors from their seed again, from now on (``Estimator.restart``); the vehicle
+        keeps its true state, so it goes on flying what its new estimate says."""
+        with self._lock:
+            self.state.estimator.restart(self.state.pose())
+
     def reported_pose_at(self, t: float) -> VehiclePose:
         """The reported state at mission time ``t`` (within the last few seconds), interpolated between reports."""
         with self._lock:
