@@ -119,6 +119,19 @@ def test_full_queue_drops_oldest_and_stays_bounded(bus):
     server.stop()
 
 
+def test_clouds_still_queued_at_stop_are_in_the_last_snapshot(bus, tmp_path):
+    """Stopping the map server inserts what it received before its last snapshot: nothing received is lost."""
+    server_session, client = bus
+    snapshot = tmp_path / "map.ot"
+    server = MapServer(server_session, Mission(map_server=MapServiceConfig(resolution=0.5, queue_size=8,
+                                                                           snapshot=str(snapshot))))
+    for i in range(3):  # never started: every cloud still waits in the queue when it stops
+        server._enqueue(ground_cloud(float(i)), K.cloud)
+    server.stop()
+    assert server.service.clouds_inserted == 3 and server.service.last_stamp == 2.0 and len(server.queue) == 0
+    assert VoxelMap.load(snapshot).stats()["leaves"] == server.map.stats()["leaves"] > 0
+
+
 def test_daemon_process_serves_and_exits_on_sigterm(tmp_path):
     ep = free_endpoint()
     snap = tmp_path / "map.ot"

@@ -85,13 +85,15 @@ class MapServer:
             self.supervisor.start(f"map-{name}", iteration)
 
     def stop(self) -> None:
-        """Finish the cloud being inserted, stop serving, write a last snapshot."""
+        """Stop serving, insert every cloud that was received, write a last snapshot."""
         self._stop.set()
         self.queue.close()
         for d in self._decls:
             d.undeclare()
         self.supervisor.join()
         self._pool.shutdown(wait=True)
+        for message in self.queue.rest():  # received before the subscriptions ended: the map keeps them
+            self._insert(message)
         if self.service.snapshot_due(float("inf")):
             self.snapshot()
 
@@ -111,13 +113,16 @@ class MapServer:
     def _insert_one(self) -> bool:
         if (message := self.queue.get(timeout=WAIT)) is None:
             return not self.queue.closed
+        self._insert(message)
+        return True
+
+    def _insert(self, message: CloudMessage) -> None:
         c = message.cloud
         try:
             self.pipeline.cloud(message.vehicle, c, message.max_range or None)
         except ValueError as exc:  # the cloud's fault (shape, NaN origin, a cost limit): rejected with the reason
             kind = exc.kind if isinstance(exc, CloudRefused) else "insert failed"
             self.rejects.reject(f"{keys.PREFIX}/{message.vehicle}/cloud", BadMessage(kind, str(exc)))
-        return True
 
     # --- layer sets -----------------------------------------------------------------------
 

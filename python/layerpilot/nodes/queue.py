@@ -35,6 +35,12 @@ class DropOldest(Generic[T]):
             self._cond.wait_for(lambda: self._items or self._closed, timeout)
             return None if self._closed or not self._items else self._items.popleft()
 
+    def rest(self) -> list[T]:
+        """The items still queued, taken out (what the worker of a closed queue left)."""
+        with self._cond:
+            items, self._items = list(self._items), deque()
+            return items
+
     @property
     def closed(self) -> bool:
         return self._closed
