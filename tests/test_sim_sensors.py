@@ -108,6 +108,10 @@ def test_restarted_errors_do_not_depend_on_the_steps_before():
     """A lock-step mission restarts the errors at its clock's 0: a take-off of any length, the same errors after."""
     from layerpilot.sim.estimate import Estimator
 
+    def state(errors: PoseErrors) -> np.ndarray:
+        e = errors.current
+        return np.array([*e.position, *e.drift, e.roll, e.pitch, e.yaw])
+
     def after_restart(steps_before: int) -> list[np.ndarray]:
         vehicle = MavlinkVehicle(Multicopter(position=(0.0, 0.0, 30.0)), "tcp:127.0.0.1:0",
                                  EndpointConfig(sensors=CONSUMER, seed=3))
@@ -117,8 +121,7 @@ def test_restarted_errors_do_not_depend_on_the_steps_before():
         errors = []
         for _ in range(40):
             vehicle.step(0.05)
-            e = vehicle.estimator.errors.current
-            errors.append(np.array([*e.position, *e.drift, e.roll, e.pitch, e.yaw]))
+            errors.append(state(vehicle.estimator.errors))
         return errors
 
     a = after_restart(7)
@@ -127,8 +130,7 @@ def test_restarted_errors_do_not_depend_on_the_steps_before():
     first = []
     for _ in range(40):
         fresh.errors.step(0.05)
-        first.append(np.array([*fresh.errors.current.position, *fresh.errors.current.drift, fresh.errors.current.roll,
-                               fresh.errors.current.pitch, fresh.errors.current.yaw]))
+        first.append(state(fresh.errors))
     assert np.array_equal(a, first)
 
 

@@ -105,18 +105,20 @@ class LiveRefiner:
         """The frame's reported pose, re-read from the telemetry at stamp + offset once the offset is known
         (a little past the newest telemetry pose by extrapolation, so that the two frames of a pair are
         never placed on different clocks)."""
-        if (dt := self.time_offset) is not None and (
-                pose := self.cameras.at(frame.stamp + dt, ahead=self.config.max_offset)) is not None:
-            return pose
-        return frame.pose
+        pose = self._on_telemetry_clock(frame.stamp)
+        return frame.pose if pose is None else pose
+
+    def _on_telemetry_clock(self, stamp: float) -> Pose | None:
+        """The camera's telemetry pose at camera-clock ``stamp`` + the offset; None while either is unknown."""
+        if (dt := self.time_offset) is None:
+            return None
+        return self.cameras.at(stamp + dt, ahead=self.config.max_offset)
 
     def _reread_priors(self) -> None:
         """Every keyframe's prior re-read from the telemetry at the current offset: the frames placed
         before the offset was known (or before the telemetry reached them) join the same clock."""
-        if (dt := self.time_offset) is None:
-            return
         for kf in self.window.frames.values():
-            if (pose := self.cameras.at(kf.stamp + dt, ahead=self.config.max_offset)) is not None:
+            if (pose := self._on_telemetry_clock(kf.stamp)) is not None:
                 kf.prior = pose
 
     def refine(self, frame: CameraFrame, partner: CameraFrame) -> tuple[CameraFrame, CameraFrame] | None:

@@ -35,14 +35,17 @@ class Estimator:
 
     def __init__(self, profile: SensorProfile, seed: int) -> None:
         self._profile, self._seed = profile, seed
-        self.errors = PoseErrors(profile, np.random.default_rng([seed, 1]))
+        self.errors = self._seeded_errors()
         self._exact = profile.exact_pose
         self._history: deque[VehiclePose] = deque()
+
+    def _seeded_errors(self) -> PoseErrors:
+        return PoseErrors(self._profile, np.random.default_rng([self._seed, 1]))
 
     def restart(self, truth: VehiclePose) -> None:
         """The errors from their seed again and the history from ``truth`` on: a lock-step mission's clock
         starts after a wall-paced take-off of varying length, and its errors must not depend on it."""
-        self.errors = PoseErrors(self._profile, np.random.default_rng([self._seed, 1]))
+        self.errors = self._seeded_errors()
         self._history.clear()
         self._history.append(truth if self._exact else self.report(truth))
 
