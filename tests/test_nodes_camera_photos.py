@@ -74,8 +74,10 @@ def test_the_camera_node_plays_photos_as_frames_and_telemetry_at_their_pace() ->
     for i, m in enumerate(frames):  # placed from the telemetry, where the photo's metadata says
         assert np.abs(m.frame.pose.matrix - player.camera_pose(i).matrix).max() < 1e-9
         assert m.frame.intrinsics == player.frame(i).intrinsics and m.frame.intrinsics.width == 1000
-    # paced by the capture times: 79 s of photos at 40x take at least 79 / 40 s between first and last
-    assert arrived[-1] - arrived[0] >= 79.0 / 40.0 - 0.1
+    # paced by the capture times at 40x: no photo goes out before its capture time / 40 after the first
+    # (a load on the machine only delays arrivals, so this bound holds however busy it is)
+    assert all(a >= node._played_from + t / 40.0 for a, t in zip(arrived, CAPTURED))
+    assert arrived[-1] - node._played_from >= 79.0 / 40.0
 
 
 def test_a_photo_folder_needs_the_camera_unlevelled() -> None:
