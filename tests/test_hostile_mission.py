@@ -266,7 +266,7 @@ height = 120
         assert all(abs(c.x) <= 221 and abs(c.y) <= 221 for c in corners), corners
         sub.undeclare()
 
-        # three SIGKILLs of the map server, 15 s apart: it comes back each time; the others stay bounded
+        # three SIGKILLs of the map server, 8 s apart: it comes back each time; the others stay bounded
         others = {"up": up.pid, "decide/uav1": pids["decide/uav1"]}
         start = {n: rss_mb(pid) for n, pid in others.items()}
         server = pids["map-server"]
@@ -277,7 +277,7 @@ height = 120
                 assert up.poll() is None and time.monotonic() < end, "".join(lines[-30:])
                 time.sleep(0.2)
             server = node_pids(lines[-20:])["map-server"]
-            time.sleep(15.0)
+            time.sleep(8.0)
         grown = {n: rss_mb(pid) - start[n] for n, pid in others.items()}
         print("after 3 map server restarts (MB): " + ", ".join(f"{n} {g:+.0f}" for n, g in grown.items()))
         assert all(g < 3 * RESTART_GROWTH_MB for g in grown.values()), grown

@@ -105,7 +105,7 @@ def test_photos_through_up_map_as_accurately_as_map_images(tmp_path) -> None:
     mission = tmp_path / "photos.toml"
     mission.write_text(f'vehicles = ["uav1"]\n[map_server]\nresolution = 0.5\nwindow = [-100.0, -100.0, 400, 400]\n'
                        f'snapshot = "{tmp_path / "map.ot"}"\n[camera]\nsource = "{BRIGHTON}"\npitch_deg = 90.0\n'
-                       'gimbal = false\n')
+                       'gimbal = false\nplay_rate = 3.0\n')
     up, lines = start_up(mission, endpoint(), tmp_path / "logs")
     try:
         wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines[-10:]),
