@@ -59,6 +59,7 @@ height = 240
         assert last["refined"] >= 5 and last["clouds"] >= 5, last
         assert "time_offset_pairs" in last, last  # the camera clock's offset is being estimated
         assert last["height_registered"] >= 1, last  # clouds are fitted to the flight's earlier ones
+        assert last["surface_checked"] >= 1, last  # and compared with the last clouds before they reach the map
         seqs = [d.seq for d in decisions]
         assert seqs == sorted(seqs) and len(set(seqs)) >= 4  # new decisions kept coming
         for s in subs:

@@ -5,7 +5,8 @@ evaluator make the same clouds: two-view stereo with the measured preset for the
 width and focal length (chosen on the first frame), or the frame's own depth (simulator, RGB-D).
 Stereo refines the poses of its pairs from the images first (``refine``, on by default;
 ``depth.live``): a real drone's reported poses are too coarse for two-view stereo; each cloud's height
-is then fitted to the flight's earlier clouds (``register_height``, ``depth.height_registration``). The vehicle's
+is then fitted to the flight's earlier clouds (``register_height``, ``depth.height_registration``), unless its surface
+jumps metres from the last clouds' (``check_surface``, ``depth.surface_check``: then it is refused). The vehicle's
 telemetry pose stream (``push_pose``) lets it learn the camera clock's offset and read the
 priors at the exposure time. Survey photos (``depth.pairs = "survey"``, a photo folder played as the
 camera) go through the photo pipeline instead: each bundle-adjusted with its nearest photos as it arrives.
@@ -22,6 +23,7 @@ from layerpilot.depth.config import DepthConfig, preset_for
 from layerpilot.depth.downscale import limit_pixels, processing_intrinsics
 from layerpilot.depth.height_registration import HeightRegistration
 from layerpilot.depth.live import LiveConfig, LiveRefiner
+from layerpilot.depth.surface_check import SurfaceCheck
 from layerpilot.depth.window import WindowConfig
 from layerpilot.geometry import CameraFrame, PointCloud, Pose
 from layerpilot.depth.source import DepthSource, GroundTruthDepth, StereoDepth
@@ -58,6 +60,7 @@ class DepthServiceConfig:
     queue_size: int = 4  # frames waiting in the live node; the oldest is dropped beyond
     refine: bool = True  # stereo: refine the pairs' poses from the images (false: use the reported poses as they are)
     register_height: bool = True  # stereo: fit each cloud's height to the flight's earlier clouds (GNSS's vertical wander)
+    check_surface: bool = True  # stereo: refuse a cloud whose surface jumps from the last clouds' (a wrong pose or scale)
     window: int = 20  # keyframes adjusted together
     gnss_sigma_h: float = 2.0  # m: how far the reported position may be off, per horizontal axis ...
     gnss_sigma_v: float = 4.0  # ... and vertically
@@ -99,6 +102,7 @@ class DepthService:
                                            else SurveyDepth(cfg.refine) if not video else None)
         self.refiner = LiveRefiner(cfg.live(gimbal)) if video and cfg.refine else None
         self.height = HeightRegistration() if video and cfg.register_height else None
+        self.surface = SurfaceCheck() if video and cfg.check_surface else None
         self.frames = 0
         self.clouds = 0
         self._reported: list[tuple[float, Pose]] = []  # without refinement: the poses the clouds were placed with
@@ -119,6 +123,9 @@ class DepthService:
         cloud = self.source.push(frame)
         if cloud is None or len(cloud) == 0:
             return None
+        if self.surface is not None and not self.surface.accepts(
+                cloud, self.height.correction if self.height is not None else 0.0):
+            return None  # counted in the check's stats
         if self.height is not None:
             cloud = self.height.register(cloud)
         self.clouds += 1
@@ -133,4 +140,5 @@ class DepthService:
     def stats(self) -> dict[str, float]:
         source = self.source.stats() if self.source is not None else {}
         height = self.height.stats() if self.height is not None else {}
-        return {"frames": self.frames, "clouds": self.clouds, **source, **height}
+        checked = self.surface.stats() if self.surface is not None else {}
+        return {"frames": self.frames, "clouds": self.clouds, **source, **height, **checked}

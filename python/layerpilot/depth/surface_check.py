@@ -1,0 +1,94 @@
+"""The surface check: a cloud whose surface jumps metres away from the surface of the clouds just before
+it is refused, not put in the map.
+
+Consecutive frames a second apart see mostly the same ground and trees, and the sensor errors that move
+a whole cloud (GNSS's wander, the barometer's drift) change by decimetres in that time. A cloud whose
+surface lies metres above or below the recent clouds' over the cells they share has a wrong pose or a
+wrong scale (a pair whose baseline the images and GNSS got wrong together passes every pair check, and
+its points land metres off: docs/depth.md, "In the mission"). Each cloud's surface is its highest point
+per ``cell`` in plan; the jump is the median height difference over the cells it shares with the
+clouds accepted in the last ``memory`` seconds. Beyond ``max_jump`` the cloud is refused and counted;
+with fewer than ``min_cells`` shared cells (the first cloud, new ground) there is nothing to compare
+and it is accepted. Refused clouds never become the reference, and the reference forgets after
+``memory`` seconds, so a lasting shift of the whole flight (a GNSS jump) is refused for at most that
+long and then taken.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from layerpilot.config import check_range
+from layerpilot.geometry import PointCloud
+
+
+@dataclass(frozen=True)
+class SurfaceCheckConfig:
+    """The defaults are the measured ones of docs/depth.md."""
+
+    cell: float = 1.0  # m: the surface is the highest point per cell of this side
+    memory: float = 10.0  # s: clouds accepted this long before a cloud are its reference
+    max_jump: float = 2.0  # m: a larger median height difference from the reference refuses the cloud
+    min_cells: int = 200  # shared cells needed to compare
+
+    def __post_init__(self) -> None:
+        check_range("surface_check.cell", self.cell, 1e-3)
+        check_range("surface_check.memory", self.memory, 0.0)
+        check_range("surface_check.max_jump", self.max_jump, 1e-3)
+        check_range("surface_check.min_cells", self.min_cells, 1)
+
+
+def surface(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """The highest point per plan cell: (sorted unique int64 cell keys, their heights)."""
+    ij = np.floor(np.asarray(points[:, :2], np.float64) / cell).astype(np.int64) + (1 << 31)
+    keys = (ij[:, 0] << 32) | ij[:, 1]
+    order = np.lexsort((points[:, 2], keys))
+    keys, z = keys[order], np.asarray(points[order, 2], np.float64)
+    last = np.r_[keys[1:] != keys[:-1], True]
+    return keys[last], z[last]
+
+
+class SurfaceCheck:
+    """Compares each cloud's surface with the recently accepted ones; keeps the accepted ones."""
+
+    def __init__(self, config: SurfaceCheckConfig = SurfaceCheckConfig()) -> None:
+        self.config = config
+        self._recent: deque[tuple[float, np.ndarray, np.ndarray]] = deque()  # (stamp, keys, heights), oldest first
+        self.checked = self.refused = 0
+        self.last_jump = float("nan")  # m, the newest cloud's median height difference (NaN: not compared)
+
+    def accepts(self, cloud: PointCloud, lift: float = 0.0) -> bool:
+        """True if ``cloud``, raised by ``lift`` metres (the height correction it is about to get), agrees with
+        the recent surface (or there is none to compare); then it joins it."""
+        c = self.config
+        while self._recent and self._recent[0][0] < cloud.stamp - c.memory:
+            self._recent.popleft()
+        keys, heights = surface(cloud.points, c.cell)
+        heights += lift
+        jump = self._jump(keys, heights)
+        self.last_jump = jump
+        if np.isfinite(jump):
+            self.checked += 1
+            if abs(jump) > c.max_jump:
+                self.refused += 1
+                return False
+        self._recent.append((cloud.stamp, keys, heights))
+        return True
+
+    def _jump(self, keys: np.ndarray, heights: np.ndarray) -> float:
+        """Median height difference from the recent surface (the newest cloud's height per cell); NaN if too few."""
+        if not self._recent:
+            return float("nan")
+        newest_first = list(reversed(self._recent))
+        ref_keys, first = np.unique(np.concatenate([k for _, k, _ in newest_first]), return_index=True)
+        ref_heights = np.concatenate([h for _, _, h in newest_first])[first]
+        _, mine, theirs = np.intersect1d(keys, ref_keys, assume_unique=True, return_indices=True)
+        if len(mine) < self.config.min_cells:
+            return float("nan")
+        return float(np.median(heights[mine] - ref_heights[theirs]))
+
+    def stats(self) -> dict[str, float]:
+        return {"surface_checked": self.checked, "surface_refused": self.refused}
