@@ -48,7 +48,7 @@ _log = logging.getLogger("layerpilot.link")
 
 
 class LinkNode:
-    """``geofence``: the mission's (``mission.build.geofence_for``); the link refuses every waypoint
+    """``geofence``: the mission's (``missionfile.geofence_for``); the link refuses every waypoint
     outside it, and each refusal is logged once per kind and counted in ``rejects``.
 
     ``connected`` is set once the autopilot's HEARTBEAT was heard (the node says ``ready`` then,
