@@ -28,7 +28,7 @@ HEALTHY_AFTER = 60.0  # s alive: the node's failures in a row start over
 MAX_FAILURES = 5  # failures in a row after which a node is reported failed and left down
 CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
 SILENT_AFTER = 30.0  # s without a status line (nodes print one every 2 s): the whole process is stuck
-STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL (links first, then the rest: see Supervisor.stop)
+STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL (links, then the rest, the map server last: Supervisor.stop)
 
 
 @dataclass
@@ -162,12 +162,16 @@ class Supervisor:
     def stop(self) -> None:
         """SIGTERM the link nodes first and wait for them (each commands the mission's end action,
         RTL by default, and waits at most ``link.end_timeout`` <= 12 s for the autopilot's answer,
-        while the simulated vehicles still run); then SIGTERM every other node (each finishes its
-        current message). Each stage SIGKILLs what is left after STOP_GRACE."""
+        while the simulated vehicles still run); then every other node but the map server (each
+        finishes its current message); the map server last, so every cloud a depth node sent is in
+        its final snapshot (and in a recording's replay). Each stage SIGKILLs what is left after
+        STOP_GRACE."""
         self.stopping.set()
         links = [n for n in self.nodes if n.name.startswith("link/")]
+        servers = [n for n in self.nodes if n.name == "map-server"]
         self._stop_group(links)
-        self._stop_group([n for n in reversed(self.nodes) if n not in links])
+        self._stop_group([n for n in reversed(self.nodes) if n not in links and n not in servers])
+        self._stop_group(servers)
 
     @staticmethod
     def _stop_group(nodes: list[NodeProcess]) -> None:
