@@ -79,23 +79,23 @@ def test_settings_are_validated():
         HeightRegistrationConfig(max_step=0.0)
 
 
-def test_the_surface_check_refuses_a_cloud_that_jumps_and_takes_a_lasting_shift_after_its_memory(clouds):
-    """Clouds a second apart that wander by decimetres pass; one 3 m off is refused and never becomes the
-    reference (the next true cloud passes); a cloud over unmapped ground has nothing to compare and passes;
-    a lasting 3 m shift is refused until the recent clouds are older than the check's memory."""
+def test_the_surface_check_refuses_a_cloud_that_jumps_and_takes_a_lasting_shift_once_most_clouds_share_it(clouds):
+    """Clouds a second apart that wander by decimetres pass; one 3 m off is refused and cannot outvote the
+    true ones (the next true cloud passes); a cloud over unmapped ground has nothing to compare and passes;
+    a lasting 3 m shift is refused until most clouds of the check's memory share it, then taken."""
     from layerpilot.depth.surface_check import SurfaceCheck, SurfaceCheckConfig
 
     check = SurfaceCheck(SurfaceCheckConfig(memory=3.0))
     assert check.accepts(clouds[0]) and not np.isfinite(check.last_jump)  # nothing before it
     assert check.accepts(_lifted(clouds[1], 0.3)) and check.last_jump == pytest.approx(0.3, abs=0.05)
     assert not check.accepts(_lifted(clouds[2], 3.0))
-    assert check.last_jump == pytest.approx(2.7, abs=0.05)  # against cloud 1, the newest, 0.3 m up
-    assert check.accepts(clouds[3]) and abs(check.last_jump) < 0.35  # compared with 0 and 1, not the refused 2
+    assert check.last_jump == pytest.approx(3.0, abs=0.05)  # against the (lower) median of clouds 0 and 1
+    assert check.accepts(clouds[3]) and abs(check.last_jump) < 0.35  # the median of 0, 0.3 and 3 m: 0.3 m
     assert check.accepts(_lifted(clouds[3], -1.5), lift=1.5)  # the height correction it is about to get
     far = PointCloud(clouds[4].points + np.float32([500.0, 0.0, 0.0]), clouds[4].origin + (500.0, 0.0, 0.0),
                      clouds[4].stamp)
     assert check.accepts(far) and not np.isfinite(check.last_jump)
     shifted = [check.accepts(_lifted(c, 3.0)) for c in clouds[5:12]]
-    assert shifted == [False, False, True, True, True, True, True]  # 5, 6 refused while cloud 3 is within 3 s
-    assert check.stats() == {"surface_checked": 10, "surface_refused": 3}  # 7 had only the far cloud to compare
+    assert shifted == [False, False, True, True, True, True, True]  # 7: its memory holds only shifted clouds
+    assert check.stats() == {"surface_checked": 11, "surface_refused": 3}
 

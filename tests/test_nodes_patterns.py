@@ -24,7 +24,7 @@ def test_up_flies_a_scripted_pattern_live(tmp_path, pattern):
     ep = free_endpoint()
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
-speed = 4.0
+speed = 6.0
 mavlink_port = {free_tcp_port()}
 [map_server]
 snapshot = ""

@@ -6,12 +6,13 @@ a whole cloud (GNSS's wander, the barometer's drift) change by decimetres in tha
 surface lies metres above or below the recent clouds' over the cells they share has a wrong pose or a
 wrong scale (a pair whose baseline the images and GNSS got wrong together passes every pair check, and
 its points land metres off: docs/depth.md, "In the mission"). Each cloud's surface is its highest point
-per ``cell`` in plan; the jump is the median height difference over the cells it shares with the
-clouds accepted in the last ``memory`` seconds. Beyond ``max_jump`` the cloud is refused and counted;
-with fewer than ``min_cells`` shared cells (the first cloud, new ground) there is nothing to compare
-and it is accepted. Refused clouds never become the reference, and the reference forgets after
-``memory`` seconds, so a lasting shift of the whole flight (a GNSS jump) is refused for at most that
-long and then taken.
+per ``cell`` in plan; the reference is, per cell, the median height of every cloud of the last
+``memory`` seconds (refused ones too), and the jump is the median difference over the cells a cloud
+shares with it. Beyond ``max_jump`` the cloud is refused and counted; with fewer than ``min_cells``
+shared cells (the first cloud, new ground) there is nothing to compare and it is accepted. A median
+over every recent view, not over the accepted ones only, keeps one wrong cloud that got in (over new
+ground) from locking out the good ones after it, and takes a lasting shift of the whole flight (a GNSS
+jump) as soon as most recent clouds share it.
 """
 
 from __future__ import annotations
@@ -51,8 +52,16 @@ def surface(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     return keys[last], z[last]
 
 
+def _cell_medians(keys: np.ndarray, heights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell key, the (lower) median of its heights: (sorted unique keys, medians)."""
+    order = np.lexsort((heights, keys))
+    keys, heights = keys[order], heights[order]
+    unique, start, count = np.unique(keys, return_index=True, return_counts=True)
+    return unique, heights[start + (count - 1) // 2]
+
+
 class SurfaceCheck:
-    """Compares each cloud's surface with the recently accepted ones; keeps the accepted ones."""
+    """Compares each cloud's surface with the recent clouds' per-cell median."""
 
     def __init__(self, config: SurfaceCheckConfig = SurfaceCheckConfig()) -> None:
         self.config = config
@@ -62,7 +71,7 @@ class SurfaceCheck:
 
     def accepts(self, cloud: PointCloud, lift: float = 0.0) -> bool:
         """True if ``cloud``, raised by ``lift`` metres (the height correction it is about to get), agrees with
-        the recent surface (or there is none to compare); then it joins it."""
+        the recent surface (or there is none to compare); either way it joins the reference."""
         c = self.config
         while self._recent and self._recent[0][0] < cloud.stamp - c.memory:
             self._recent.popleft()
@@ -70,21 +79,20 @@ class SurfaceCheck:
         heights += lift
         jump = self._jump(keys, heights)
         self.last_jump = jump
+        ok = not (np.isfinite(jump) and abs(jump) > c.max_jump)
         if np.isfinite(jump):
             self.checked += 1
-            if abs(jump) > c.max_jump:
-                self.refused += 1
-                return False
-        self._recent.append((cloud.stamp, keys, heights))
-        return True
+            self.refused += not ok
+        self._recent.append((cloud.stamp, keys, heights))  # refused too: the reference is every recent view
+        return ok
 
     def _jump(self, keys: np.ndarray, heights: np.ndarray) -> float:
-        """Median height difference from the recent surface (the newest cloud's height per cell); NaN if too few."""
+        """Median height difference from the recent surface (per cell, the median of the recent clouds'
+        heights); NaN if too few cells are shared."""
         if not self._recent:
             return float("nan")
-        newest_first = list(reversed(self._recent))
-        ref_keys, first = np.unique(np.concatenate([k for _, k, _ in newest_first]), return_index=True)
-        ref_heights = np.concatenate([h for _, _, h in newest_first])[first]
+        ref_keys, ref_heights = _cell_medians(np.concatenate([k for _, k, _ in self._recent]),
+                                              np.concatenate([h for _, _, h in self._recent]))
         _, mine, theirs = np.intersect1d(keys, ref_keys, assume_unique=True, return_indices=True)
         if len(mine) < self.config.min_cells:
             return float("nan")

@@ -4,7 +4,7 @@ A circle or a polygon in the map frame (ENU metres, the same shapes as a behavio
 of interest), widened by ``margin`` metres, and a band of heights above home. The link
 checks every position target against it before anything is sent to the autopilot
 (:class:`~layerpilot.link.link.FlightLink`); a mission builds its fence in one place,
-``layerpilot.mission.build.geofence_for``. This module knows nothing of missions or
+``layerpilot.missionfile.geofence_for``. This module knows nothing of missions or
 behaviors: the link sits below them.
 """
 
