@@ -5,7 +5,7 @@ Consecutive frames a second apart see mostly the same ground and trees, and the 
 a whole cloud (GNSS's wander, the barometer's drift) change by decimetres in that time. A cloud whose
 surface lies metres above or below the recent clouds' over the cells they share has a wrong pose or a
 wrong scale (a pair whose baseline the images and GNSS got wrong together passes every pair check, and
-its points land metres off: docs/depth.md, "In the mission"). Each cloud's surface is its highest point
+its points land metres off: docs/eval.md, "Real sensors"). Each cloud's surface is its highest point
 per ``cell`` in plan; the reference is, per cell, the median height of every cloud of the last
 ``memory`` seconds (refused ones too), and the jump is the median difference over the cells a cloud
 shares with it. Beyond ``max_jump`` the cloud is refused and counted; with fewer than ``min_cells``

@@ -29,6 +29,7 @@ MAX_FAILURES = 5  # failures in a row after which a node is reported failed and 
 CHECK_PERIOD = 0.2  # s between looks at the nodes (dead ones, the end of --duration)
 SILENT_AFTER = 30.0  # s without a status line (nodes print one every 2 s): the whole process is stuck
 STOP_GRACE = 15.0  # s between SIGTERM and SIGKILL (links, then the rest, the map server last: Supervisor.stop)
+DELIVERY_GRACE = 0.5  # s for the hub to deliver what the stopped nodes sent last, before the map server stops
 
 
 @dataclass
@@ -171,6 +172,7 @@ class Supervisor:
         servers = [n for n in self.nodes if n.name == "map-server"]
         self._stop_group(links)
         self._stop_group([n for n in reversed(self.nodes) if n not in links and n not in servers])
+        time.sleep(DELIVERY_GRACE)
         self._stop_group(servers)
 
     @staticmethod
