@@ -37,7 +37,8 @@ from layerpilot.mission.clock import MissionClock
 from layerpilot.missionfile import Override, load_mission
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.mission.map_service import MapService
-from layerpilot.mission.pilot import Pilot, PilotConfig, load_pilot_behavior
+from layerpilot.decide.behavior import load_behavior
+from layerpilot.mission.pilot import Pilot, PilotConfig
 from layerpilot.nodes.decide import DecideNode
 from layerpilot.nodes.up import node_commands, up
 from layerpilot.sim.battery import BatteryConfig
@@ -56,7 +57,7 @@ def test_the_pilot_turns_home_in_time_to_land_with_the_reserve():
     or less, when the autopilot first reports 37 %, and lands with 24.5 %, above ArduCopter's
     BATT_LOW_MAH failsafe (750 mAh, 15 %) that the simulator copies."""
     cfg = PilotConfig(behavior="lawnmower", battery_reserve=0.25, return_speed=5.0)
-    pilot = Pilot(cfg, load_pilot_behavior("lawnmower"), pattern=np.array([[300.0, 400.0, 50.0, 0.0]]))
+    pilot = Pilot(cfg, load_behavior("lawnmower"), pattern=np.array([[300.0, 400.0, 50.0, 0.0]]))
     where, turned = (300.0, 400.0, 50.0), None
     for t in range(0, 1201):
         charge = round(100 * (1.0 - t / 1200.0)) / 100  # SYS_STATUS battery_remaining, whole percent

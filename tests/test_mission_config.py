@@ -27,7 +27,7 @@ def test_flags_override_fields_of_the_parsed_mission() -> None:
     (Override("--world-size", "sim.world.size", -1.0), r"^--world-size must be in \[20.0, 5000.0\], got -1.0$"),
     (Override("--duration", "evaluation.duration", 0.0), r"^--duration must be in \[1.0, 36000.0\], got 0.0$"),
     (Override("--behavior", "decide.behavior", "nonsense"),
-     r"^--behavior 'nonsense': .*not a preset \(balanced, .*; patterns: lawnmower, orbit\)$"),
+     r"^--behavior 'nonsense': not a file and not a preset \(balanced, .*, orbit-rings, survey, .*\)$"),
 ])
 def test_a_bad_flag_value_is_reported_under_the_flags_name(override, message) -> None:
     with pytest.raises(ConfigError, match=message):

@@ -19,7 +19,7 @@ from conftest import free_tcp_port, operator_session, start_up, stop_up
 K = Keys("uav1")
 
 
-@pytest.mark.parametrize("pattern", ["lawnmower", "orbit"])
+@pytest.mark.parametrize("pattern", ["lawnmower", "orbit", "survey", "survey-side", "orbit-rings"])
 def test_up_flies_a_scripted_pattern_live(tmp_path, pattern):
     ep = free_endpoint()
     mission = tmp_path / "mission.toml"

@@ -26,7 +26,8 @@ from layerpilot.mission.camera_track import CameraSettings
 from layerpilot.mission.core import MissionCore
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
-from layerpilot.mission.pilot import PilotConfig, load_pilot_behavior
+from layerpilot.decide.behavior import load_behavior
+from layerpilot.mission.pilot import PilotConfig
 from layerpilot.ros2.topics import Ros2Config
 from layerpilot.sim.simulator import SimConfig
 
@@ -109,8 +110,17 @@ class Mission:
         becomes ``survey`` for a photo folder, else ``video``."""
         depth = self.depth if self.depth.pairs != "auto" else dataclasses.replace(
             self.depth, pairs="survey" if self.camera.plays_photos else "video")
-        return MissionCore(tuple(self.vehicles), self.map_server, depth, self.decide, self.sim.camera,
+        return MissionCore(tuple(self.vehicles), self.map_server, depth, self.decide, self.simulator.camera,
                            self.sim.frame_rate_hz, self.camera.gimbal, geofence_for(self))
+
+    @property
+    def simulator(self) -> SimConfig:
+        """The ``[sim]`` table as flown: the camera at the decide behavior's mount (``camera_pitch_deg``) when
+        the behavior states one (a nadir survey), else at ``sim.camera.pitch_deg``."""
+        pitch = load_behavior(self.decide.behavior).camera_pitch_deg
+        if pitch is None:
+            return self.sim
+        return dataclasses.replace(self.sim, camera=dataclasses.replace(self.sim.camera, pitch_deg=pitch))
 
     def mavlink_url(self, vehicle: str) -> str:
         return f"tcp:127.0.0.1:{self.mavlink_port + 10 * self.vehicles.index(vehicle)}"
@@ -120,11 +130,11 @@ def geofence_for(mission: Mission) -> Geofence:
     """The mission's geofence, which the link enforces whoever sends a waypoint (the live link node,
     `layerpilot link` actions and the lock-step evaluator all take it from here).
 
-    Area: the decide behavior's area of interest (a pattern's: the balanced preset's), a circle
+    Area: the decide behavior's area of interest, a circle
     around ``area.center`` (else ``decide.home``) or its polygon, widened by
     ``link.geofence_margin``; heights above home: ``link.link.alt_min_m`` .. ``alt_max_m``.
     """
-    area = load_pilot_behavior(mission.decide.behavior).area
+    area = load_behavior(mission.decide.behavior).area
     limits = dict(margin=mission.link.geofence_margin, alt_min=mission.link.link.alt_min_m,
                   alt_max=mission.link.link.alt_max_m)
     if area.shape == "polygon":
@@ -176,7 +186,13 @@ def apply_overrides(mission: Mission, tables: dict[str, Any], overrides: list[Ov
             reason = str(exc).split(": ", 1)[-1] if ": " in str(exc) else str(exc)
             raise ConfigError(f"{o.flag} {o.value!r}: {reason}") from None
         _set(merged, o.key, o.value)
-    return from_dict(Mission, merged, "mission")
+    mission = from_dict(Mission, merged, "mission")
+    for o in overrides:
+        mount = load_behavior(mission.decide.behavior).camera_pitch_deg
+        if o.key == "sim.camera.pitch_deg" and mount is not None and mount != o.value:
+            raise ConfigError(f"{o.flag} {o.value}: behavior {mission.decide.behavior!r} flies its own camera mount "
+                              f"(camera_pitch_deg = {mount:g}); set it in a copy of the behavior file")
+    return mission
 
 
 def _set(tables: dict[str, Any], key: str, value: Any) -> None:
@@ -188,8 +204,8 @@ def _set(tables: dict[str, Any], key: str, value: Any) -> None:
 
 
 def to_tables(mission: Mission) -> dict[str, Any]:
-    """The mission as plain nested tables."""
-    return dataclasses.asdict(mission)
+    """The mission as plain nested tables, the simulator's camera as flown (``Mission.simulator``)."""
+    return dataclasses.asdict(dataclasses.replace(mission, sim=mission.simulator))
 
 
 def to_settings(mission: Mission) -> dict[str, Any]:

@@ -27,7 +27,7 @@ def _digest(run_dir: Path) -> dict[str, str]:
 def main(mission: Mission) -> int:
     """Fly ``mission`` sequentially, then overlapped; 0 if the two runs are byte-identical."""
     duration = mission.evaluation.duration
-    camera = mission.sim.camera
+    camera = mission.simulator.camera
     print(f"{mission.decide.behavior}, {duration:g} mission s, {camera.width}x{camera.height} camera, "
           f"world seed {mission.sim.world.seed}", flush=True)
     result: dict[str, object] = {"duration_s": duration, "camera": f"{camera.width}x{camera.height}"}

@@ -8,7 +8,8 @@ import time
 
 import numpy as np
 
-from layerpilot.mission.patterns import lawnmower
+from layerpilot.mission.footprint import footprint_width
+from layerpilot.mission.patterns import Region, survey_lines
 from layerpilot.camera import CameraConfig
 from layerpilot.sim.world import World, WorldConfig
 
@@ -17,7 +18,8 @@ TARGET_FPS = 8.0
 
 def survey_poses(world: World, count: int, height_above_ground: float = 30.0) -> list[tuple[np.ndarray, float]]:
     """``count`` vehicle poses (position, yaw) spread along a lawnmower path over the world."""
-    wp = lawnmower((0.0, 0.0), 0.4 * world.config.size, 0.0, CameraConfig(), height_above_ground)
+    half = footprint_width(CameraConfig(), height_above_ground) / 2
+    wp = survey_lines(Region.disc((0.0, 0.0), 0.4 * world.config.size), 0.0, 0.0, (-half, half), 0.3, sideways=False)
     seg = np.diff(wp[:, :2], axis=0)
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*seg.T))])
     poses = []

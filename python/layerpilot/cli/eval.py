@@ -56,7 +56,7 @@ def _mission_options(p: argparse.ArgumentParser) -> None:
 
 def register(commands: argparse._SubParsersAction) -> None:
     demo = commands.add_parser("demo", help="fly one scored simulated mission (lock-step) and write its report")
-    demo.add_argument("--behavior", help="preset, .toml path, or pattern (lawnmower, orbit) (decide.behavior)")
+    demo.add_argument("--behavior", help="behavior preset (a scripted baseline too) or .toml path (decide.behavior)")
     demo.add_argument("--seed", type=int, help="decision seed (decide.seed)")
     demo.add_argument("--name", default=None, help="run directory name (default: demo-BEHAVIOR)")
     demo.add_argument("--view", nargs="?", const="native", choices=["native", "web"],
@@ -150,7 +150,7 @@ def _study(args: argparse.Namespace) -> None:
 
     from layerpilot.eval.summary import write_study_report
     from layerpilot.missionfile import to_settings
-    from layerpilot.mission.pilot import PATTERNS
+    from layerpilot.decide.behavior import load_behavior
     from layerpilot.progress import Progress
 
     if args.quick:
@@ -165,8 +165,8 @@ def _study(args: argparse.Namespace) -> None:
     for world in worlds:
         sim = dataclasses.replace(mission.sim, world=dataclasses.replace(mission.sim.world, seed=world))
         for behavior in ev.behaviors:
-            # Scripted patterns have no decision noise: one run per world stands for every seed.
-            for seed in range(1 if behavior in PATTERNS else ev.seeds):
+            # A pattern that only repeats has no decision noise: one run per world stands for every seed.
+            for seed in range(1 if load_behavior(behavior).deterministic else ev.seeds):
                 decide = dataclasses.replace(mission.decide, behavior=behavior, seed=seed)
                 run = dataclasses.replace(mission, decide=decide, sim=sim)
                 name = f"{Path(behavior).stem}-s{seed}" if args.world_seeds is None else \

@@ -57,10 +57,10 @@ def _node(args, mission, vehicle, session) -> Running:
         if args.write_frame is not None:
             raise ValueError("--write-frame: with camera_only = true the vehicle is another autopilot, whose EKF "
                              "origin this node does not know")
-        node = CameraOnlyNode(session, vehicle, mission.sim)
+        node = CameraOnlyNode(session, vehicle, mission.simulator)
         return Running(lambda: {"frames": node.frames, "rejected": node.rejects.total},
                        info={"camera_only": True}, run=node.run)
-    config = dataclasses.replace(mission.sim, urls=(args.mavlink or mission.mavlink_url(vehicle),))
+    config = dataclasses.replace(mission.simulator, urls=(args.mavlink or mission.mavlink_url(vehicle),))
     try:
         node = SimNode(session, vehicle, config, speed=mission.speed, duration=args.duration,
                        clock=clock_from_args(args))

@@ -92,8 +92,10 @@ class Terrain:
     corridor: float = 5.0  # metres either side of the straight path to the waypoint
     min_altitude: float = 20.0
     max_altitude: float = 120.0
+    leg: float = 25.0  # metres: a scripted pattern's legs are flown in pieces this long, each at its own height
 
     def __post_init__(self) -> None:
+        _positive("leg", self.leg)
         if not self.clearance >= 0:
             raise ValueError(f"clearance = {self.clearance} must be >= 0")
         if not self.corridor >= 0:
@@ -128,10 +130,49 @@ class Flight:
 
 
 @dataclass(frozen=True)
+class Pattern:
+    """A scripted flight the pilot flies instead of deciding (docs/decide.md, "Scripted baselines").
+
+    ``survey``: parallel lines, camera along the track (nadir with ``camera_pitch_deg = 90``);
+    ``survey-side``: parallel lines, camera 90 deg to the track, always to the same side;
+    ``orbit``: once around the area's edge, camera to the centre; ``orbit-rings``: orbits
+    inset from the edge until the area is covered. Line and ring spacing is the view's width
+    across the track times (1 - ``side_overlap``); the speed puts frames (1 - ``front_overlap``)
+    x the view's length along the track apart, or one stereo baseline apart when it is not set;
+    ``speed`` (m/s) overrides the rule, 0 leaving it to the autopilot.
+    ``then``: after the last waypoint fly the pattern again (``repeat``, a patrol) or plan the next
+    flight over the map's gaps with the behavior's weights (``replan``, as `layerpilot plan next`).
+    """
+
+    kind: Literal["none", "survey", "survey-side", "orbit", "orbit-rings"] = "none"
+    side_overlap: float = 0.3
+    front_overlap: float | None = None  # None: consecutive frames one target stereo baseline apart
+    speed: float | None = None  # m/s instead of the overlap rule; 0: the autopilot's default speed
+    heading_deg: float | None = None  # line direction (ENU deg, 0 = east); None: across the area's narrowest width
+    then: Literal["repeat", "replan"] = "repeat"
+    step: float = 10.0  # m between waypoints on an orbit
+    stale_after: float = 150.0  # s: replan treats a cell seen this long ago as a gap
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.side_overlap < 1.0:
+            raise ValueError(f"side_overlap = {self.side_overlap} is out of range [0, 1)")
+        if self.front_overlap is not None and not 0.0 <= self.front_overlap < 1.0:
+            raise ValueError(f"front_overlap = {self.front_overlap} is out of range [0, 1)")
+        if self.heading_deg is not None and not -360.0 <= self.heading_deg <= 360.0:
+            raise ValueError(f"heading_deg = {self.heading_deg} is out of range [-360, 360]")
+        _positive("step", self.step)
+        _positive("stale_after", self.stale_after)
+        if self.speed is not None and not 0.0 <= self.speed <= 100.0:
+            raise ValueError(f"speed = {self.speed} is out of range [0, 100]")
+        if self.kind == "none" and self.then != "repeat":
+            raise ValueError("then: only a pattern (kind) has a pass to follow up")
+
+
+@dataclass(frozen=True)
 class Behavior:
     """One behavior: layer weights, distance ring, path history, noise, altitude and options."""
 
-    weights: dict[str, float]
+    weights: dict[str, float] = field(default_factory=dict)
     name: str = ""
     description: str = ""
     r_e: float = 10.0  # exclusion radius (m): never choose closer than this
@@ -147,9 +188,16 @@ class Behavior:
     retarget: Retarget = Retarget()
     terrain: Terrain = Terrain()
     flight: Flight = Flight()
+    pattern: Pattern = Pattern()
+    camera_pitch_deg: float | None = None  # the camera mount this behavior flies (None: the mission's)
 
     def __post_init__(self) -> None:
-        _check_weights(self.weights, "weights")
+        if self.weights or not self.scripted:  # a pure pattern decides nothing and may weight nothing
+            _check_weights(self.weights, "weights")
+        elif self.pattern.then == "replan":
+            raise ValueError("weights: pattern.then = 'replan' plans with the weights; give at least one")
+        if self.camera_pitch_deg is not None and not 0.0 < self.camera_pitch_deg <= 90.0:
+            raise ValueError(f"camera_pitch_deg = {self.camera_pitch_deg} is out of range (0, 90]")
         if not self.r_e >= 0:
             raise ValueError(f"r_e = {self.r_e} must be >= 0")
         if not self.r_i > self.r_e:
@@ -159,6 +207,16 @@ class Behavior:
         if not 0 <= self.noise <= 0.1:
             raise ValueError(f"noise = {self.noise} is out of range [0, 0.1]")
         _positive("altitude", self.altitude)
+
+    @property
+    def scripted(self) -> bool:
+        """The pilot flies a pattern (``pattern.kind``) rather than deciding each waypoint."""
+        return self.pattern.kind != "none"
+
+    @property
+    def deterministic(self) -> bool:
+        """No decision noise touches the flight: a pattern that only repeats itself."""
+        return self.scripted and self.pattern.then == "repeat"
 
     @property
     def layer_names(self) -> list[str]:

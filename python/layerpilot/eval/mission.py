@@ -206,7 +206,7 @@ class LockstepMission:
         if self.view is not None:
             self.view.start(self.pilot.behavior, self.mission.decide.home, self.geometry)
         ev = self.mission.evaluation
-        sim_cfg = replace(self.mission.sim, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
+        sim_cfg = replace(self.mission.simulator, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
         stages = Stages(("depth", "truth"), self.overlap)
         with Simulator(sim_cfg) as sim:
             host, port = sim.endpoint.addresses[0]
@@ -348,6 +348,7 @@ class LockstepMission:
                     "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending
                     else "duration",
                     "retargets": sum(r["reason"] == "retarget" for r in records),
+                    "replans": pilot.replans,  # a pattern's next flights over the gaps (pattern.then = "replan")
                     "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
                     "frames": self.frames, "clouds": depth.clouds,
                     **{f"depth_{k}": v for k, v in depth.stats().items()}}  # why frames gave no cloud

@@ -4,39 +4,35 @@ from __future__ import annotations
 
 import dataclasses
 
-from layerpilot.mission import flight
+from layerpilot.mission import flight, patterns
 from layerpilot.mission.heading import HeadingPolicy
 from layerpilot.mission.core import MissionCore
 from layerpilot.depth.config import preset_for
 from layerpilot.mission.depth_service import DepthService
 from layerpilot.mission.map_service import Volume
-from layerpilot.mission.pilot import Pilot, load_pilot_behavior
+from layerpilot.decide.behavior import load_behavior
+from layerpilot.mission.pilot import Pilot
+from layerpilot.mission.replan import GapReplanner
 
 
 def build_pilot(mission: MissionCore) -> Pilot:
-    """The mission's pilot: the decision maker, or a pattern flown at the survey speed its camera allows."""
+    """The mission's pilot: the decision maker, or a pattern with the lines, speed and mount its camera needs."""
     cfg = mission.decide
-    behavior = load_pilot_behavior(cfg.behavior)
-    if cfg.pattern is None:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
-        camera, max_range = mission.camera, mission.depth.max_depth
-        behavior = flight.flight_behavior(behavior, camera, max_range)
-        ratio = preset_for(camera.width).pick.target_baseline_ratio
+    camera, max_range = mission.camera, mission.depth.max_depth
+    ratio = preset_for(camera.width).pick.target_baseline_ratio
+    behavior = flight.flight_behavior(load_behavior(cfg.behavior), camera, max_range)
+    if not behavior.scripted:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
         speed = flight.cruise_speed(behavior, camera, mission.frame_rate_hz, ratio, cfg.speed)
         view = (flight.camera_view(behavior, HeadingPolicy(behavior, cfg.home), camera, max_range)
                 if "view_gain" in behavior.layer_names else None)
         return Pilot(dataclasses.replace(cfg, speed=speed), behavior, seed=cfg.seed, view=view)
-    from layerpilot.mission import patterns
-
-    camera, altitude = mission.camera, behavior.altitude
-    centre, radius = behavior.area.center or cfg.home, behavior.area.radius
-    if cfg.pattern == "lawnmower":
-        waypoints = patterns.lawnmower(centre, radius, altitude, camera, altitude)
-        # straight legs at top speed put frames too far apart for stereo: fly at the survey speed
-        ratio = preset_for(camera.width).pick.target_baseline_ratio
-        speed = patterns.survey_speed(camera, altitude, mission.frame_rate_hz, ratio)
-    else:
-        waypoints, speed = patterns.orbit(centre, radius, altitude), cfg.speed
-    return Pilot(cfg, behavior, pattern=waypoints, pattern_speed=speed)
+    route = patterns.route_for(behavior.pattern, patterns.Region.of(behavior.area, cfg.home), behavior.altitude,
+                               camera, mission.frame_rate_hz, ratio, max_range, start=cfg.home)
+    waypoints = route.waypoints
+    if behavior.terrain.enabled:  # each piece of a long leg gets its own height over the terrain
+        waypoints = patterns.densify(waypoints, behavior.terrain.leg, start=cfg.home)
+    replan = GapReplanner(behavior, cfg.home, cfg.seed) if behavior.pattern.then == "replan" else None
+    return Pilot(cfg, behavior, pattern=waypoints, pattern_speed=route.speed, replan=replan)
 
 
 def build_depth_service(mission: MissionCore) -> DepthService:

@@ -13,14 +13,8 @@ import math
 from layerpilot.decide.behavior import Behavior
 from layerpilot.layers.view_gain import CameraView
 from layerpilot.mission.heading import HeadingPolicy
-from layerpilot.mission.patterns import footprint_width, survey_speed
+from layerpilot.mission.footprint import footprint_width, survey_speed, vertical_fov_deg
 from layerpilot.camera import CameraConfig
-
-
-def vertical_fov_deg(camera: CameraConfig) -> float:
-    """The vertical field of view of square pixels with the camera's horizontal one."""
-    half = math.atan(math.tan(math.radians(camera.hfov_deg) / 2) * camera.height / camera.width)
-    return math.degrees(2 * half)
 
 
 def footprint_hops(camera: CameraConfig, height: float, max_range: float) -> tuple[float, float]:

@@ -5,13 +5,14 @@ newest pose, mission time and column layers; it returns a :class:`Command` when 
 must fly somewhere new (first tick, target reached, or a better target while flying when
 the behavior opts into retargeting) and ``None`` otherwise. Arrival is one rule
 (horizontal distance to the target), and the choice is the MCDM decision maker or a
-scripted pattern (lawnmower, orbit), so what the study scores is what flies.
+scripted pattern (a behavior's ``[pattern]``: survey lines, orbits, rings), so what the study scores
+is what flies.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +23,7 @@ from layerpilot.decide.behavior import Behavior, load_behavior
 from layerpilot.decide.decision import Decision
 from layerpilot.decide.area import zone_mask
 from layerpilot.decide.maker import DecisionMaker
+from layerpilot.decide.terrain import terrain_altitude
 from layerpilot.layers import LayerContext, compute_layers
 from layerpilot.layers.view_gain import CameraView
 from layerpilot.grid import GridWindow
@@ -29,14 +31,11 @@ from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission.energy import HomeReturn
 from layerpilot.mission.heading import HeadingPolicy
 
-PATTERNS = ("lawnmower", "orbit")  # scripted behaviors; they fly the balanced preset's area and altitude
-
-
 @dataclass(frozen=True)
 class PilotConfig:
     """The ``[decide]`` table of a mission file (one per vehicle)."""
 
-    behavior: str = "balanced"  # preset name, .toml path, or a pattern: lawnmower, orbit
+    behavior: str = "balanced"  # preset name (config/behaviors/, the scripted baselines too) or .toml path
     arrival_radius: float = 3.0  # m, horizontal: the target counts as reached
     home: tuple[float, float] = (0.0, 0.0)  # launch / operator point (map frame)
     speed: float = 0.0  # m/s sent with each MCDM waypoint, 0 = autopilot default (patterns set their own)
@@ -50,21 +49,7 @@ class PilotConfig:
         check_range("decide.speed", self.speed, 0.0, 100.0)
         check_range("decide.battery_reserve", self.battery_reserve, 0.0, 0.9)
         check_range("decide.return_speed", self.return_speed, 0.1, 100.0)
-        load_pilot_behavior(self.behavior)  # a bad name or file fails when the mission loads
-
-    @property
-    def pattern(self) -> str | None:
-        return self.behavior if self.behavior in PATTERNS else None
-
-
-def load_pilot_behavior(name: str) -> Behavior:
-    """The behavior a pilot flies; a pattern flies the balanced preset's area and altitude."""
-    try:
-        return load_behavior("balanced" if name in PATTERNS else name)
-    except ConfigError as exc:
-        if "not a preset" not in str(exc):
-            raise
-        raise ConfigError(f"{str(exc).removesuffix(')')}; patterns: {', '.join(PATTERNS)})") from None
+        load_behavior(self.behavior)  # a bad name or file fails when the mission loads
 
 
 @dataclass(frozen=True)
@@ -76,7 +61,7 @@ class Command:
     position: tuple[float, float, float]
     yaw: float
     speed: float
-    decision: Decision | None  # None for a scripted pattern and the way home
+    decision: Decision | None  # None for a scripted pattern (and its replanned flights) and the way home
     reason: str  # "start", "reached", "retarget", "conflict" (a drone with priority took our target), "resume",
     #              "battery" (home: the charge left needs it; the last command of the flight)
 
@@ -95,19 +80,25 @@ class Command:
 class Pilot:
     """Arrival check, decision maker or pattern, retargeting; transport-free and deterministic.
 
-    ``pattern``: (N, 4) waypoints x, y, z, yaw flown in a loop (a patrol), or None for MCDM.
+    ``pattern``: (N, 4) waypoints x, y, z, yaw flown in a loop (a patrol), or None for MCDM;
+    ``replan`` (columns, position, time) -> (M, 4) waypoints: what to fly once a pass of the pattern
+    is done (its next flight over the gaps; none: the pattern again). With the behavior's terrain
+    following on, each pattern waypoint's z clears the map's surface near the leg to it.
     ``view``: the camera at a candidate, for the view_gain layer (mission.flight.camera_view).
     """
 
     def __init__(self, cfg: PilotConfig, behavior: Behavior, *, pattern: np.ndarray | None = None,
-                 pattern_speed: float = 0.0, seed: int | None = None, view: CameraView | None = None) -> None:
+                 pattern_speed: float = 0.0, seed: int | None = None, view: CameraView | None = None,
+                 replan: Callable[[ColumnLayers, Sequence[float], float], np.ndarray] | None = None) -> None:
         self.cfg = cfg
         self.behavior = behavior
         self.heading = HeadingPolicy(behavior, cfg.home)
         self.view = view
         self._aoi: tuple[object, np.ndarray] | None = None  # (geometry, mask) of the last layer set
-        self.pattern = pattern
+        self.pattern = self.route = pattern  # route: what is being flown (the pattern, or a replanned flight)
         self.pattern_speed = pattern_speed
+        self.replan = replan
+        self.replans = 0
         self.maker = None if pattern is not None else DecisionMaker(behavior, cfg.home, seed=seed)
         self.target: np.ndarray | None = None
         self.seq = 0
@@ -173,7 +164,7 @@ class Pilot:
         if reason is not None:
             self._waiting = reason
             if self.pattern is not None:
-                return self._from_pattern(time, reason)
+                return self._from_pattern(position, time, columns, reason)
             if columns is None or not self._covers(columns, position):
                 return None
             self.evaluations += 1
@@ -218,10 +209,23 @@ class Pilot:
         wp = tuple(float(v) for v in d.waypoint)
         return self._command(time, wp, self.heading.yaw(position, wp), self.cruise_speed, d, reason)
 
-    def _from_pattern(self, time: float, reason: str) -> Command:
-        wp = self.pattern[self._next_pattern % len(self.pattern)]  # starts over when done, as a patrol would
+    def _from_pattern(self, position: Sequence[float], time: float, columns: ColumnLayers | None,
+                      reason: str) -> Command | None:
+        if self._next_pattern >= len(self.route):  # a pass is done: the next flight over the gaps, or again
+            if self.replan is not None:
+                if columns is None:
+                    return None
+                planned = self.replan(columns, position, time)
+                self.replans += 1
+                self.route = planned if len(planned) else self.pattern
+            self._next_pattern = 0
+        wp = self.route[self._next_pattern]
         self._next_pattern += 1
-        return self._command(time, tuple(float(v) for v in wp[:3]), float(wp[3]), self.cruise_speed, None, reason)
+        z = float(wp[2])
+        if self.behavior.terrain.enabled and columns is not None:
+            z = terrain_altitude(columns.elevation, columns.geometry, (position[0], position[1]),
+                                 (float(wp[0]), float(wp[1])), self.behavior.terrain, z)
+        return self._command(time, (float(wp[0]), float(wp[1]), z), float(wp[3]), self.cruise_speed, None, reason)
 
     def _command(self, time: float, wp: tuple[float, float, float], yaw: float, speed: float,
                  decision: Decision | None, reason: str) -> Command:

@@ -79,6 +79,7 @@ def snapshot(pilot: Pilot, time: float, flown_s: float, mission_id: str = "") ->
             "seq": pilot.seq, "reached": pilot.reached, "ending": pilot.ending,
             "target": None if pilot.target is None else [float(v) for v in pilot.target],
             "next_pattern": pilot._next_pattern,
+            "route": None if pilot.route is pilot.pattern else pilot.route.tolist(),  # a replanned flight
             "schedule_phase": None if maker is None else maker.schedule.phase,
             "rng": None if maker is None else maker.rng.bit_generator.state,
             "ticks": [list(t) for t in pilot.ticks]}
@@ -139,6 +140,11 @@ def _restore(pilot: Pilot, state: dict[str, Any]) -> None:
     pilot.seq, pilot.reached = int(state["seq"]), int(state["reached"])
     # a pattern flies again the leg it was on; the decision maker chooses afresh from where the drone is
     pilot._next_pattern = max(0, int(state["next_pattern"]) - (state["target"] is not None))
+    if state.get("route") is not None:
+        route = np.asarray(state["route"], np.float64)
+        if route.ndim != 2 or route.shape[1] != 4 or not np.all(np.isfinite(route)):
+            raise ValueError("route: expected finite (x, y, z, yaw) rows")
+        pilot.route = route
     pilot._waiting = "resume"
 
 
