@@ -83,3 +83,44 @@ def test_the_behaviors_mount_is_the_simulated_cameras_and_a_contrary_pitch_flag_
         load_mission(None, [Override("--behavior", "decide.behavior", "survey"),
                             Override("--pitch", "sim.camera.pitch_deg", 70.0)])
     assert load_mission(None, [Override("--pitch", "sim.camera.pitch_deg", 70.0)]).core.camera.pitch_deg == 70.0
+
+
+def test_terrain_following_keeps_the_stated_height_over_a_ridge() -> None:
+    """The ridges mission's survey over its mapped world (the true surface, trees included, in a real
+    VoxelMap): every waypoint clears the highest surface near its leg by exactly the stated 30 m,
+    unless the limits clip it, so it is never lower than 30 m above the surface under it."""
+    from layerpilot.grid import GridGeometry
+    from layerpilot.map import VoxelMap
+    from layerpilot.sim.world import World
+
+    mission = load_mission("ridges", [Override("--behavior", "decide.behavior", "survey")])
+    world = World(mission.sim.world)
+    g = GridGeometry(-260.0, -260.0, 1.0, 520, 520)
+    top = world.surface_height(g) - float(world.terrain_height(0.0, 0.0))  # map frame: home's ground is 0
+    xs, ys = g.cell_centers()
+    voxels = VoxelMap(1.0)
+    for r in range(0, g.height, 20):  # seen from 10 m above each 20 m tile
+        for c in range(0, g.width, 20):
+            tile = np.s_[r:r + 20, c:c + 20]
+            cloud = np.column_stack([xs[tile].ravel(), ys[tile].ravel(), top[tile].ravel() - 0.5])
+            voxels.insert(cloud.astype(np.float32), np.array([xs[tile].mean(), ys[tile].mean(), top[tile].max() + 10]),
+                          stamp=1.0)
+    columns = voxels.column_layers_for(g)
+    assert np.nanmax(top) - np.nanmin(top) > 60.0  # a ridge, trees on it
+    pilot = build_pilot(mission.core)
+    terrain = pilot.behavior.terrain
+    assert terrain.enabled and terrain.clearance == 30.0
+    position, lowest, exact = (0.0, 0.0, 30.0), np.inf, 0
+    for k in range(len(pilot.pattern)):
+        c = pilot.step(position, float(k), columns)
+        x, y, z = c.position
+        (sx, sy), (dx, dy) = position[:2], (x - position[0], y - position[1])
+        t = np.clip(((xs - sx) * dx + (ys - sy) * dy) / max(dx * dx + dy * dy, 1e-12), 0, 1)
+        near = (np.hypot(xs - sx - t * dx, ys - sy - t * dy) <= 10.0 + 0.5 * np.sqrt(2)).ravel()  # a cell touching
+        highest = float(columns.elevation.ravel()[near].max())
+        exact += z == pytest.approx(highest + 30.0, abs=1e-4)
+        assert z == pytest.approx(np.clip(highest + 30.0, terrain.min_altitude, terrain.max_altitude), abs=1e-4)
+        i, j = g.cell_of(x, y)
+        lowest = min(lowest, z - float(top[i, j]))
+        position = c.position
+    assert exact >= 0.9 * len(pilot.pattern) and lowest >= 30.0 - 1.0

@@ -83,3 +83,29 @@ def test_config_is_validated_naming_the_key():
     with pytest.raises(ConfigError, match="world.sise"):
         from_dict(WorldConfig, {"sise": 100.0}, "world")
     assert from_dict(WorldConfig, {"seed": 7, "size": 600}, "world").size == 600.0
+
+
+def test_harder_world_options_give_ridges_fields_and_tall_stands_and_leave_the_default_alone() -> None:
+    plain = World(WorldConfig(seed=4, size=300.0))
+    hard = World(WorldConfig(seed=4, size=640.0, ridge_height=60.0, fields=6, tall_stand_height=35.0))
+    x = np.linspace(-300, 300, 241)
+    gx, gy = np.meshgrid(x, x)
+    ridge = hard._ridges(np.random.default_rng([4, 1]), gx, gy)
+    assert ridge.max() - ridge.min() > 50.0 and abs(float(hard._ridges(np.random.default_rng([4, 1]),
+                                                                         np.zeros(1), np.zeros(1))[0])) < 1e-9
+    h = hard.terrain_height(gx, gy)
+    assert h.max() - h.min() > 60.0
+    # no tree in a field, none at the launch point; tall stands exist and keep to their cap
+    assert len(hard.fields) == 6 and not hard.in_field(hard.trees.x, hard.trees.y).any()
+    assert not hard.in_field(np.zeros(1), np.zeros(1))[0]
+    tall = hard.trees.height > hard.config.tree_height_max
+    assert 0.05 < tall.mean() < 0.6 and hard.trees.height.max() <= 35.0
+    # the options draw from their own generator: the hills, clearings and tree places of the seed stay
+    flat = World(WorldConfig(seed=4, size=640.0, fields=6, tall_stand_height=35.0))
+    base = World(WorldConfig(seed=4, size=640.0))
+    assert np.array_equal(flat.heightfield, base.heightfield) and np.array_equal(flat.clearings, base.clearings)
+    assert np.allclose(hard.heightfield - flat.heightfield, hard._ridges(np.random.default_rng([4, 1]),
+                                                                        *np.meshgrid(*2 * [np.linspace(-320, 320, 321)])))
+    assert len(plain.fields) == 0
+    with pytest.raises(ValueError, match="tall_stand_height"):
+        WorldConfig(tall_stand_height=10.0)

@@ -15,7 +15,6 @@ from rerun.chunk import RrdReader
 from layerpilot.cli.eval import _run
 from layerpilot.decide import area_geometry
 from layerpilot.missionfile import Override, load_mission
-from layerpilot.decide.behavior import load_behavior
 from layerpilot.viz.scene import aggregate_colors
 from conftest import balanced_behavior
 
@@ -48,7 +47,7 @@ def test_demo_run_saves_an_rrd_with_the_mission_entities(tmp_path):
     for name in ("A0", "A1", "A2", "A3"):  # each tick's aggregates, placed on the layers: transform + image
         assert rows[f"/layers/{name}"] == 2 * len(chosen) > 0, name
     # placed where the tick computed them: the chosen cell, inside the window drawn, has (about) its top score
-    behavior = load_behavior(mission.decide.behavior)
+    behavior = mission.decide.flown_behavior()
     under = area_geometry(behavior.area, mission.decide.home, resolution=mission.map_server.resolution)
     batches = [c.to_record_batch() for c in RrdReader(run / "mission.rrd").stream() if c.entity_path == "/layers/A3"]
 

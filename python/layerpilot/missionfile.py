@@ -26,7 +26,6 @@ from layerpilot.mission.camera_track import CameraSettings
 from layerpilot.mission.core import MissionCore
 from layerpilot.mission.depth_service import DepthServiceConfig
 from layerpilot.mission.map_service import MapServiceConfig
-from layerpilot.decide.behavior import load_behavior
 from layerpilot.mission.pilot import PilotConfig
 from layerpilot.ros2.topics import Ros2Config
 from layerpilot.sim.simulator import SimConfig
@@ -117,7 +116,7 @@ class Mission:
     def simulator(self) -> SimConfig:
         """The ``[sim]`` table as flown: the camera at the decide behavior's mount (``camera_pitch_deg``) when
         the behavior states one (a nadir survey), else at ``sim.camera.pitch_deg``."""
-        pitch = load_behavior(self.decide.behavior).camera_pitch_deg
+        pitch = self.decide.flown_behavior().camera_pitch_deg
         if pitch is None:
             return self.sim
         return dataclasses.replace(self.sim, camera=dataclasses.replace(self.sim.camera, pitch_deg=pitch))
@@ -134,7 +133,7 @@ def geofence_for(mission: Mission) -> Geofence:
     around ``area.center`` (else ``decide.home``) or its polygon, widened by
     ``link.geofence_margin``; heights above home: ``link.link.alt_min_m`` .. ``alt_max_m``.
     """
-    area = load_behavior(mission.decide.behavior).area
+    area = mission.decide.flown_behavior().area
     limits = dict(margin=mission.link.geofence_margin, alt_min=mission.link.link.alt_min_m,
                   alt_max=mission.link.link.alt_max_m)
     if area.shape == "polygon":
@@ -188,7 +187,7 @@ def apply_overrides(mission: Mission, tables: dict[str, Any], overrides: list[Ov
         _set(merged, o.key, o.value)
     mission = from_dict(Mission, merged, "mission")
     for o in overrides:
-        mount = load_behavior(mission.decide.behavior).camera_pitch_deg
+        mount = mission.decide.flown_behavior().camera_pitch_deg
         if o.key == "sim.camera.pitch_deg" and mount is not None and mount != o.value:
             raise ConfigError(f"{o.flag} {o.value}: behavior {mission.decide.behavior!r} flies its own camera mount "
                               f"(camera_pitch_deg = {mount:g}); set it in a copy of the behavior file")

@@ -10,7 +10,6 @@ from layerpilot.mission.core import MissionCore
 from layerpilot.depth.config import preset_for
 from layerpilot.mission.depth_service import DepthService
 from layerpilot.mission.map_service import Volume
-from layerpilot.decide.behavior import load_behavior
 from layerpilot.mission.pilot import Pilot
 from layerpilot.mission.replan import GapReplanner
 
@@ -20,7 +19,7 @@ def build_pilot(mission: MissionCore) -> Pilot:
     cfg = mission.decide
     camera, max_range = mission.camera, mission.depth.max_depth
     ratio = preset_for(camera.width).pick.target_baseline_ratio
-    behavior = flight.flight_behavior(load_behavior(cfg.behavior), camera, max_range)
+    behavior = flight.flight_behavior(cfg.flown_behavior(), camera, max_range)
     if not behavior.scripted:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
         speed = flight.cruise_speed(behavior, camera, mission.frame_rate_hz, ratio, cfg.speed)
         view = (flight.camera_view(behavior, HeadingPolicy(behavior, cfg.home), camera, max_range)

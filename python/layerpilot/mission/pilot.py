@@ -11,6 +11,7 @@ is what flies.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from layerpilot.config import ConfigError, check_range
-from layerpilot.decide.behavior import Behavior, load_behavior
+from layerpilot.decide.behavior import Area, Behavior, Terrain, load_behavior
 from layerpilot.decide.decision import Decision
 from layerpilot.decide.area import zone_mask
 from layerpilot.decide.maker import DecisionMaker
@@ -43,13 +44,23 @@ class PilotConfig:
     battery_reserve: float = 0.25  # charge (0..1) to land with: the pilot turns home in time to keep it
     return_speed: float = 5.0  # m/s the way home is reckoned at (mission.energy)
     state: str = ""  # directory the survey's state is saved in, for `up --resume` (mission.resume); "" = none
+    area: Area | None = None  # the area of interest this mission surveys, instead of the behavior's
+    terrain: Terrain | None = None  # terrain following for whatever behavior flies (relief), instead of the behavior's
 
     def __post_init__(self) -> None:
         check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)
         check_range("decide.speed", self.speed, 0.0, 100.0)
         check_range("decide.battery_reserve", self.battery_reserve, 0.0, 0.9)
         check_range("decide.return_speed", self.return_speed, 0.1, 100.0)
-        load_behavior(self.behavior)  # a bad name or file fails when the mission loads
+        self.flown_behavior()  # a bad name or file fails when the mission loads
+
+    def flown_behavior(self) -> Behavior:
+        """The behavior file with this mission's area of interest and terrain following, where the mission states
+        them (``[decide.area]``, ``[decide.terrain]``)."""
+        behavior = load_behavior(self.behavior)
+        if self.area is not None:
+            behavior = dataclasses.replace(behavior, area=self.area)
+        return behavior if self.terrain is None else dataclasses.replace(behavior, terrain=self.terrain)
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,11 @@ class WorldConfig:
     clearing_radius_max: float = 35.0
     launch_clearing_radius: float = 20.0
     tile_size: float = 50.0
+    ridge_height: float = 0.0  # m from valley floor to ridge crest added to the hills (0: none)
+    ridge_wavelength: float = 250.0  # m between neighbouring ridges
+    fields: int = 0  # open fields: treeless rotated rectangles, larger than clearings
+    field_size_max: float = 120.0  # m, a field's longer side
+    tall_stand_height: float = 0.0  # m: trees in the densest patches grow to this height (0: none)
 
     def __post_init__(self) -> None:
         check_range("size", self.size, 20.0, 5000.0)
@@ -56,6 +61,14 @@ class WorldConfig:
         check_range("clearing_radius_max", self.clearing_radius_max, 0.0, self.size)
         check_range("launch_clearing_radius", self.launch_clearing_radius, 0.0, self.size)
         check_range("tile_size", self.tile_size, 5.0, self.size)
+        check_range("ridge_height", self.ridge_height, 0.0, 1000.0)
+        check_range("ridge_wavelength", self.ridge_wavelength, 20.0, 10000.0)
+        check_range("fields", self.fields, 0, 100)
+        check_range("field_size_max", self.field_size_max, 10.0, self.size)
+        check_range("tall_stand_height", self.tall_stand_height, 0.0, 100.0)
+        if self.tall_stand_height and self.tall_stand_height < self.tree_height_max:
+            raise ValueError(f"tall_stand_height = {self.tall_stand_height} must be 0 or >= tree_height_max "
+                             f"= {self.tree_height_max}")
 
 
 @dataclass(frozen=True)
@@ -102,9 +115,12 @@ class World:
         self.terrain_res = c.size / n
         axis = -self.half + np.arange(n + 1) * self.terrain_res
         gx, gy = np.meshgrid(axis, axis)
-        self.heightfield = self._hills(rng, gx, gy).astype(np.float64)  # (n+1, n+1), row = y
+        # The harder worlds' options draw from their own generator: a world without them is the same as before.
+        extra = np.random.default_rng([c.seed, 1])
+        self.heightfield = (self._hills(rng, gx, gy) + self._ridges(extra, gx, gy)).astype(np.float64)  # row = y
         self.clearings = self._clearings(rng)
-        self.trees = self._place_trees(rng)
+        self.fields = self._fields(extra)
+        self.trees = self._place_trees(rng, extra)
         self._build_mesh(gx, gy, rng)
 
     # --- terrain -----------------------------------------------------------------
@@ -115,6 +131,21 @@ class World:
         for octave, amp in enumerate((1.0, 0.45, 0.2)):
             h += amp * _value_noise(rng, x, y, c.hill_wavelength / 2 ** octave, extent)
         return 0.5 * c.hill_height * h
+
+    def _ridges(self, rng: np.random.Generator, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Ridged noise: sharp crests and round valleys ``ridge_height`` apart, zero at the launch point."""
+        c = self.config
+        if not c.ridge_height:
+            return np.zeros_like(x)
+        extent = self.half + c.ridge_wavelength
+
+        def crest(px: np.ndarray, py: np.ndarray, r: np.random.Generator) -> np.ndarray:
+            return (1.0 - np.abs(_value_noise(r, px, py, c.ridge_wavelength, extent))) ** 2
+
+        state = rng.bit_generator.state
+        h = crest(x, y, rng)
+        rng.bit_generator.state = state  # the same lattice for the launch point's height
+        return c.ridge_height * (h - crest(np.zeros(1), np.zeros(1), rng)[0])
 
     def terrain_height(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
         """Exact meshed terrain height at (x, y); points outside the world are clamped to its edge."""
@@ -141,7 +172,28 @@ class World:
         launch = np.array([[0.0, 0.0, c.launch_clearing_radius]])
         return np.vstack([launch, np.column_stack([centres, radii])])
 
-    def _place_trees(self, rng: np.random.Generator) -> Trees:
+    def _fields(self, rng: np.random.Generator) -> np.ndarray:
+        """(F, 5) open fields: centre x, y, half length, half width, heading (rad); none touch the launch point."""
+        c = self.config
+        rows = []
+        while len(rows) < c.fields:
+            half_l = rng.uniform(0.5, 1.0) * c.field_size_max / 2
+            half_w = rng.uniform(0.3, 0.7) * half_l
+            centre = rng.uniform(-self.half + half_w, self.half - half_w, size=2)
+            if np.hypot(*centre) > half_l + c.launch_clearing_radius:
+                rows.append((*centre, half_l, half_w, rng.uniform(0, np.pi)))
+        return np.array(rows, np.float64).reshape(-1, 5)
+
+    def in_field(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """True where (x, y) lies in an open field."""
+        inside = np.zeros(np.shape(x), bool)
+        for fx, fy, half_l, half_w, heading in self.fields:
+            ca, sa = np.cos(heading), np.sin(heading)
+            along, across = (x - fx) * ca + (y - fy) * sa, -(x - fx) * sa + (y - fy) * ca
+            inside |= (np.abs(along) <= half_l) & (np.abs(across) <= half_w)
+        return inside
+
+    def _place_trees(self, rng: np.random.Generator, extra: np.random.Generator) -> Trees:
         c = self.config
         count = int(round(c.trees_per_hectare * c.size * c.size / 1e4))
         cand = rng.uniform(-self.half + 2, self.half - 2, size=(4 * count + 16, 2))
@@ -150,10 +202,15 @@ class World:
         keep = rng.uniform(size=len(cand)) < 0.35 + 0.65 * (patch + 1) / 2
         d = np.linalg.norm(cand[:, None, :] - self.clearings[None, :, :2], axis=2)
         keep &= np.all(d > self.clearings[None, :, 2], axis=1)
+        keep &= ~self.in_field(cand[:, 0], cand[:, 1])
+        dense = patch[keep][:count] > 0.35  # the densest patches: tall stands, when asked for
         cand = cand[keep][:count]
         m = len(cand)
         kind = np.where(rng.uniform(size=m) < c.conifer_fraction, CONIFER, BROADLEAF)
         height = rng.uniform(c.tree_height_min, c.tree_height_max, size=m)
+        if c.tall_stand_height:
+            tall = extra.uniform(c.tree_height_max, c.tall_stand_height, size=m)
+            height = np.where(dense, tall, height)
         crown = np.where(kind == CONIFER, 0.22, 0.3) * height * rng.uniform(0.8, 1.2, size=m)
         return Trees(cand[:, 0], cand[:, 1], self.terrain_height(cand[:, 0], cand[:, 1]), height, crown, kind)
 

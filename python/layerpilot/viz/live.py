@@ -33,7 +33,6 @@ from layerpilot.grid import GridGeometry
 from layerpilot.map.columns import ColumnLayers
 from layerpilot.map.voxel_map import Voxels
 from layerpilot.missionfile import Mission
-from layerpilot.decide.behavior import load_behavior
 from layerpilot.nodes.decide import decode_aggregates
 from layerpilot.viz.scene import MissionScene, area_outline
 
@@ -57,7 +56,7 @@ class LiveView:
         self.vehicle = vehicle or mission.vehicles[0]
         self.keys = keys.Keys(self.vehicle)
         self.period, self.map_period = period, map_period
-        self.behavior = load_behavior(mission.decide.behavior)
+        self.behavior = mission.decide.flown_behavior()
         self.rejects = Rejects(_log)
         self.heard: Counter[str] = Counter()  # messages per topic of this vehicle
         self.logged: Counter[str] = Counter()  # what went into the scene, per kind
