@@ -182,7 +182,7 @@ def test_resume_keeps_the_schedule_phase_and_refuses_what_it_cannot_use(tmp_path
     survey.save(pilot, tmp_path / "uav1.json", 100.0, 100.0)
     fresh = build_pilot(mission.core)
     assert survey.load(fresh, tmp_path / "uav1.json")["flown_s"] == 100.0 and fresh.maker.schedule.phase == 1
-    with pytest.raises(ValueError, match="saved by behavior 'explore-then-patrol', the mission flies 'balanced'"):
+    with pytest.raises(ValueError, match="saved by behavior 'explore-then-patrol', the mission flies 'view-side'"):
         survey.load(build_pilot(load_mission("default").core), tmp_path / "uav1.json")
     (tmp_path / "bad.json").write_text('{"version": 1, "behav')
     with pytest.raises(ValueError, match="bad.json: damaged mission state"):

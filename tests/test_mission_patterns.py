@@ -155,3 +155,14 @@ def test_bad_area_is_rejected_naming_the_argument():
         Region.disc((0, 0, 0), 10.0)
     with pytest.raises(ValueError, match="side_overlap"):
         Pattern(kind="survey", side_overlap=1.0)
+
+
+def test_the_papers_lawnmower_keeps_its_centred_lines():
+    """`lawnmower`: ceil(200 / 48.50) = 5 lines exactly 48.50 m apart (footprint 69.28 m x 0.7), centred."""
+    wp = survey_lines(Region.disc((10.0, -20.0), 100.0), 45.0, 0.0, (-69.282 / 2, 69.282 / 2), 0.3, sideways=False,
+                      start=(-100.0, -120.0), placement="centred")
+    assert wp.shape == (10, 4)
+    assert np.allclose(wp[::2, 1], -20.0 + (np.arange(5) - 2) * 69.282 * 0.7, atol=1e-2)
+    assert np.allclose(np.hypot(wp[:, 0] - 10.0, wp[:, 1] + 20.0), 100.0)
+    chords = 2 * np.sqrt(100.0 ** 2 - ((np.arange(5) - 2) * 69.282 * 0.7) ** 2)
+    assert path_length(wp) > chords.sum() + 4 * 48.5 - 1e-3 and chords.sum() == pytest.approx(647.1, abs=0.1)

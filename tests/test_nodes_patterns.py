@@ -1,5 +1,6 @@
-"""`layerpilot up` flies the scripted patterns live: lawnmower and orbit, each for at least 60 mission
-seconds, with the pilot reporting waypoints reached and the vehicle's track passing through them."""
+"""`layerpilot up` flies the scripted baselines live, each for at least 60 mission seconds, with the pilot
+reporting waypoints reached and the vehicle's track passing through them; survey-refly goes on to its
+next flights over the gaps."""
 
 from __future__ import annotations
 
@@ -19,8 +20,11 @@ from conftest import free_tcp_port, operator_session, start_up, stop_up
 K = Keys("uav1")
 
 
-@pytest.mark.parametrize("pattern", ["lawnmower", "orbit", "survey", "survey-side", "orbit-rings"])
+@pytest.mark.parametrize("pattern", ["lawnmower", "orbit", "survey", "survey-side", "orbit-rings", "survey-refly"])
 def test_up_flies_a_scripted_pattern_live(tmp_path, pattern):
+    if pattern == "survey-refly":  # over a 40 m disc: one line, then the next flights over the gaps
+        from test_baselines import small_refly
+        pattern = str(small_refly(tmp_path))
     ep = free_endpoint()
     mission = tmp_path / "mission.toml"
     mission.write_text(f"""
@@ -58,7 +62,8 @@ height = 120
                 client.declare_subscriber(K.state, lambda s: states.append(msg.decode_mission_state(s.payload.to_bytes()))),
                 client.declare_subscriber(K.pose, lambda s: poses.append(msg.decode_state(s.payload.to_bytes())))]
         end = time.monotonic() + 150
-        while not (waypoints and states and states[-1].waypoints_reached >= 2
+        enough = len(expected.pattern) + 1 if "refly" in pattern else 2
+        while not (waypoints and states and states[-1].waypoints_reached >= enough
                    and poses and poses[-1].stamp - min(w.stamp for w in waypoints.values()) >= 60.0):
             assert up.poll() is None, "up exited:\n" + "".join(lines[-30:])
             assert time.monotonic() < end, f"{pattern}: too slow:\n" + "".join(lines[-30:])
@@ -71,6 +76,8 @@ height = 120
         for w, want in zip(flown, expected.pattern):
             np.testing.assert_allclose(w.position, want[:3], atol=1e-6)
             assert w.yaw == pytest.approx(want[3]) and w.speed == pytest.approx(expected.cruise_speed)
+        if "refly" in pattern:  # past the pattern: planned over the gaps, reached like the pattern's own
+            assert states[-1].waypoints_reached > len(expected.pattern) and len(flown) > len(expected.pattern)
         # reached means flown through: the track passes within the arrival radius of each reached waypoint
         track = np.array([p.position for p in poses])
         for w in flown[: states[-1].waypoints_reached]:

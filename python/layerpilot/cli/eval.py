@@ -68,7 +68,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     demo.set_defaults(func=_demo)
 
     study = commands.add_parser("study", help="compare behaviors over several seeds (the paper's six by default)")
-    study.add_argument("--behaviors", type=_names, help="comma-separated list (evaluation.behaviors)")
+    study.add_argument("--behaviors", type=_names, help="comma-separated list (evaluation.behaviors); "
+                       "'default' is the mission's own decide.behavior")
     study.add_argument("--seeds", type=int, help="decision seeds per MCDM behavior (evaluation.seeds)")
     study.add_argument("--world-seeds", type=_seeds, help="comma-separated forest seeds: every behavior flies "
                        "each world (default: the mission's sim.world.seed); tables give mean ± std over all runs")
@@ -158,7 +159,8 @@ def _study(args: argparse.Namespace) -> None:
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     mission = _mission(args)
-    ev = mission.evaluation
+    behaviors = [mission.decide.behavior if b == "default" else b for b in mission.evaluation.behaviors]
+    ev = dataclasses.replace(mission.evaluation, behaviors=list(dict.fromkeys(behaviors)))
     out = Path(ev.out) / args.name
     jobs: list[tuple[str, object, str]] = []
     worlds = args.world_seeds or [mission.sim.world.seed]

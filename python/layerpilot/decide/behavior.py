@@ -149,6 +149,8 @@ class Pattern:
     front_overlap: float | None = None  # None: consecutive frames one target stereo baseline apart
     speed: float | None = None  # m/s instead of the overlap rule; 0: the autopilot's default speed
     heading_deg: float | None = None  # line direction (ENU deg, 0 = east); None: across the area's narrowest width
+    placement: Literal["edges", "centred"] = "edges"  # lines: views on the area's edges, or exactly the spacing
+    #   apart and centred on the area (the paper's lawnmower)
     then: Literal["repeat", "replan"] = "repeat"
     step: float = 10.0  # m between waypoints on an orbit
     stale_after: float = 150.0  # s: replan treats a cell seen this long ago as a gap

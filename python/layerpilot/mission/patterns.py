@@ -173,13 +173,21 @@ def line_heading(region: Region, heading_deg: float | None) -> float:
     return float(angles[int(np.argmin(widths))])
 
 
-def _line_offsets(region: Region, n: np.ndarray, band: tuple[float, float], side_overlap: float) -> np.ndarray:
+def _line_offsets(region: Region, n: np.ndarray, band: tuple[float, float], side_overlap: float,
+                  placement: str = "edges") -> np.ndarray:
     """Track offsets along ``n`` of the fewest lines whose views, ``band`` (near, far) across each track,
     span the region with at least ``side_overlap`` of a view shared by neighbours: the first view's near
-    edge and the last one's far edge on the region's edges, the lines between evenly spaced."""
+    edge and the last one's far edge on the region's edges, the lines between evenly spaced.
+    ``centred`` (the paper's lawnmower): ceil(extent / spacing) lines exactly the spacing apart, centred
+    on the region, those outside it dropped."""
     lo, hi = region.span(n)
     near, far = band
     width = far - near
+    if placement == "centred":
+        spacing = width * (1.0 - side_overlap)
+        count = max(1, math.ceil((hi - lo) / spacing))
+        offsets = (lo + hi) / 2 + (np.arange(count) - (count - 1) / 2) * spacing
+        return offsets[(offsets > lo) & (offsets < hi)]
     if hi - lo <= width:
         return np.array([min(max((lo + hi) / 2 - (near + far) / 2, lo), hi)])
     count = math.ceil((hi - lo - width) / (width * (1.0 - side_overlap)) - 1e-9) + 1
@@ -187,7 +195,7 @@ def _line_offsets(region: Region, n: np.ndarray, band: tuple[float, float], side
 
 
 def survey_lines(region: Region, altitude: float, heading: float, band: tuple[float, float], side_overlap: float,
-                 sideways: bool, start: Sequence[float] | None = None) -> np.ndarray:
+                 sideways: bool, start: Sequence[float] | None = None, placement: str = "edges") -> np.ndarray:
     """Boustrophedon lines along ``heading`` covering the region, started at the corner nearest ``start``.
 
     ``band``: the view's extent across the track (near, far), towards the camera for ``sideways``
@@ -203,7 +211,7 @@ def survey_lines(region: Region, altitude: float, heading: float, band: tuple[fl
     for flip in (1.0, -1.0):  # which side the lines start from (and a side camera looks to)
         u0 = flip * _unit(heading)
         n = _left(u0)
-        offsets = _line_offsets(region, n, band, side_overlap)
+        offsets = _line_offsets(region, n, band, side_overlap, placement)
         for first in (1.0, -1.0):  # which way the first line runs
             rows = []
             for k, off in enumerate(offsets):
@@ -277,7 +285,7 @@ def route_for(pattern: Pattern, region: Region, altitude: float, camera: CameraC
     if pattern.kind in ("survey", "survey-side"):
         across = (-width / 2, width / 2) if along_track else band
         wp = survey_lines(region, altitude, line_heading(region, pattern.heading_deg), across,
-                          pattern.side_overlap, not along_track, start)
+                          pattern.side_overlap, not along_track, start, pattern.placement)
     elif pattern.kind in ("orbit", "orbit-rings"):
         wp = rings(region, altitude, band, pattern.side_overlap, pattern.step, start,
                    count=1 if pattern.kind == "orbit" else None)
