@@ -124,3 +124,12 @@ def test_terrain_following_keeps_the_stated_height_over_a_ridge() -> None:
         lowest = min(lowest, z - float(top[i, j]))
         position = c.position
     assert exact >= 0.9 * len(pilot.pattern) and lowest >= 30.0 - 1.0
+
+
+def test_the_study_report_names_every_behaviors_settings_as_flown(study) -> None:
+    runs, refly = study
+    page = (runs.parent / "report.md").read_text()
+    assert "## Behaviors as flown" in page
+    assert ("| survey | area circle r 100 m; altitude 50 m; camera 90° down; pattern survey; side overlap 0.3; "
+            "front overlap stereo baseline |") in page
+    assert f"| {refly} | area circle r 40 m;" in page and "then replan (stale after 150 s); weights fringe 1" in page

@@ -190,7 +190,8 @@ def _study(args: argparse.Namespace) -> None:
     shared = {k: v for k, v in to_settings(mission).items() if k not in ("decide.behavior", "decide.seed")}
     if args.world_seeds is not None:
         shared["sim.world.seed"] = ", ".join(map(str, worlds))
-    paths = write_study_report(out, runs, {**shared, "quick": args.quick})
+    flown = {b: dataclasses.replace(mission.decide, behavior=b).flown_behavior().summary() for b in ev.behaviors}
+    paths = write_study_report(out, runs, {**shared, "quick": args.quick}, flown)
     with warnings.catch_warnings():  # a metric that is NaN in every seed stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
         means = {b: {k: float(np.nanmean([f[k] for f in fs])) for k in fs[0]} for b, fs in finals.items()}

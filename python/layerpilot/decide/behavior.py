@@ -220,6 +220,31 @@ class Behavior:
         """No decision noise touches the flight: a pattern that only repeats itself."""
         return self.scripted and self.pattern.then == "repeat"
 
+    def summary(self) -> str:
+        """The settings that shape this behavior's flight, in one line (a study names every behavior's)."""
+        area = (f"circle r {self.area.radius:g} m" if self.area.shape == "circle"
+                else f"polygon of {len(self.area.polygon)} vertices")
+        mount = "the mission's pitch" if self.camera_pitch_deg is None else f"{self.camera_pitch_deg:g}° down"
+        parts = [f"area {area}", f"altitude {self.altitude:g} m", f"camera {mount}"]
+        if self.scripted:
+            p = self.pattern
+            front = "stereo baseline" if p.front_overlap is None else f"{p.front_overlap:g}"
+            parts += [f"pattern {p.kind}", f"side overlap {p.side_overlap:g}"]
+            if p.speed is None:
+                parts.append(f"front overlap {front}")
+            else:
+                parts.append("speed autopilot default" if p.speed == 0 else f"speed {p.speed:g} m/s")
+            if p.then == "replan":
+                parts.append(f"then replan (stale after {p.stale_after:g} s)")
+        if self.weights:
+            parts.append("weights " + ", ".join(f"{k} {v:g}" for k, v in self.weights.items()))
+            if not self.scripted:
+                parts += [f"heading {self.flight.heading}", f"speed {self.flight.speed}",
+                          f"view_stale_s {self.layers.view_stale_s:g}"]
+        if self.terrain.enabled:
+            parts.append(f"terrain following {self.terrain.clearance:g} m")
+        return "; ".join(parts)
+
     @property
     def layer_names(self) -> list[str]:
         """Every layer any phase of this behavior weights (what must be computed)."""

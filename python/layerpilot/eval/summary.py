@@ -157,9 +157,13 @@ def _run_rows(dirs: Mapping[str, Sequence[Path]]) -> list[list[Any]]:
 
 
 def write_study_report(
-    out_dir: str | os.PathLike, runs: Mapping[str, Sequence[str | os.PathLike]], settings: Mapping[str, Any]
+    out_dir: str | os.PathLike, runs: Mapping[str, Sequence[str | os.PathLike]], settings: Mapping[str, Any],
+    behaviors: Mapping[str, str] | None = None,
 ) -> dict[str, Path]:
-    """Compare behaviors from their run directories (several seeds each): Table 1, plots, paths."""
+    """Compare behaviors from their run directories (several seeds each): Table 1, plots, paths.
+
+    ``behaviors``: each behavior's settings in one line (``Behavior.summary``), shown as flown.
+    """
     if not runs or any(not dirs for dirs in runs.values()):
         raise ValueError("runs: every behavior needs at least one run directory")
     out = Path(out_dir)
@@ -188,6 +192,9 @@ def write_study_report(
                 "a behavior whose motion the picker rejects (e.g. flying straight along the camera's axis) "
                 "maps little whatever its path.")
     report.table(["run", "frames", "stereo clouds", "waypoints", "wall (s)"], _run_rows(dirs))
+    if behaviors:
+        report.heading("Behaviors as flown")
+        report.table(["behavior", "settings"], [[b, text] for b, text in behaviors.items()])
     report.heading("Settings")
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
@@ -201,5 +208,6 @@ def write_study_report(
         "behaviors": {b: {"runs": [str(d) for d in ds], "final": finals[b], "milestones": milestones[b]}
                       for b, ds in dirs.items()},
         "settings": dict(settings),
+        "behaviors_as_flown": dict(behaviors or {}),
     }
     return report.write(out, metrics)

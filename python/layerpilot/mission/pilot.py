@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from layerpilot.config import ConfigError, check_range
+from layerpilot.config import check_range
 from layerpilot.decide.behavior import Area, Behavior, Terrain, load_behavior
 from layerpilot.decide.decision import Decision
 from layerpilot.decide.area import zone_mask
