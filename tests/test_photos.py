@@ -158,3 +158,17 @@ def test_calibration_file_overrides_exif_intrinsics(folder, tmp_path):
         read_calibration(bad)
     with pytest.raises(ValueError, match="no .jpg photos"):
         read_folder(tmp_path)
+
+
+def test_bench_photos_finds_the_shared_photos_from_the_working_directory_or_names_the_flags(tmp_path, monkeypatch):
+    from layerpilot.bench import photos as bench
+
+    here = tmp_path / "project"
+    (tmp_path / "shared" / "data" / "brighton_beach" / "images").mkdir(parents=True)
+    here.mkdir()
+    monkeypatch.chdir(here)
+    assert bench.shared_photos().resolve() == (tmp_path / "shared" / "data" / "brighton_beach").resolve()
+    monkeypatch.chdir(tmp_path)  # no ../shared here, and an installed package has none beside it
+    monkeypatch.setattr(bench, "__file__", str(tmp_path / "site" / "layerpilot" / "bench" / "photos.py"))
+    with pytest.raises(ValueError, match=r"^no default photo folder: pass --folder DIR and --reference FILE"):
+        bench.shared_photos()

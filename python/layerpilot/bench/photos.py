@@ -22,7 +22,18 @@ from layerpilot.eval.surface import read_reference, score_elevation, score_point
 from layerpilot.photos import PhotoConfig, read_folder
 from layerpilot.photos.config import POSES
 
-DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "brighton_beach"
+SHARED = Path("..") / "shared" / "data" / "brighton_beach"  # beside the project: from its root, or the checkout's
+
+
+def shared_photos() -> Path:
+    """The shared Brighton Beach survey: ``../shared/data/brighton_beach`` from the working directory (any install),
+    else beside the source checkout (an editable install); ValueError naming the flags when neither holds it."""
+    here = [Path.cwd() / SHARED, Path(__file__).resolve().parents[3] / SHARED]
+    for data in here:
+        if (data / "images").is_dir():
+            return data
+    raise ValueError(f"no default photo folder: pass --folder DIR and --reference FILE "
+                     f"(looked for images/ in {', '.join(str(d.resolve()) for d in here)})")
 
 
 def _fmt(v: float, spec: str = ".3f") -> str:
@@ -85,8 +96,9 @@ def run(folder_path: Path, reference_path: Path, width: int) -> dict:
 
 
 def main(folder: Path | None, reference: Path | None, width: int) -> int:
-    folder = folder or DATA / "images"
-    reference = reference or DATA / "model.laz"
+    if folder is None or reference is None:
+        data = shared_photos()
+        folder, reference = folder or data / "images", reference or data / "model.laz"
     out = run(folder, reference, width)
     print(f"\n{' / '.join(POSES)}: within 1 m " + " / ".join(_fmt(out[k]['within_1m']) for k in POSES)
           + ", elevation median " + " / ".join(_fmt(out[k]['elevation_median_m'], '.2f') for k in POSES)

@@ -53,7 +53,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     b.set_defaults(func=_bus)
 
     b = benches.add_parser("photos", help="stereo from real photos vs a reference cloud, adjusted vs refined vs raw poses")
-    b.add_argument("--folder", type=Path, help="photo folder (default: ../shared/data/brighton_beach/images)")
+    b.add_argument("--folder", type=Path, help="photo folder (default: ../shared/data/brighton_beach/images "
+                   "from the working directory, else beside the source checkout)")
     b.add_argument("--reference", type=Path, help="LAS/LAZ reference cloud (default: that folder's model.laz)")
     b.add_argument("--width", type=int, default=1000, help="working image width in pixels")
     b.set_defaults(func=_photos)
