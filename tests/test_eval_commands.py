@@ -71,7 +71,7 @@ def test_demo_states_its_real_time_factor_and_the_paths_it_wrote(demo) -> None:
 
 
 def test_study_quick_report_has_every_section_and_plausible_values(tmp_path) -> None:
-    out = _layerpilot("study", "--quick", "--duration", "20", "--behaviors", "balanced,orbit", "--out", str(tmp_path))
+    out = _layerpilot("study", "--quick", "--duration", "20", "--behaviors", "default,orbit", "--out", str(tmp_path))
     study = tmp_path / "study"
     assert f"report: {study / 'report.html'}" in out
     page = (study / "report.html").read_text()
@@ -80,7 +80,7 @@ def test_study_quick_report_has_every_section_and_plausible_values(tmp_path) -> 
         assert section in page, section
     assert len(re.findall(r"data:image/png;base64,", page)) >= 8 + 2 * 2  # metric plots + each run's path, layers
     behaviors = json.loads((study / "metrics.json").read_text())["behaviors"]
-    assert set(behaviors) == {"balanced", "orbit"}
+    assert set(behaviors) == {"view-side", "orbit"}  # default: the mission's own behavior
     for name, entry in behaviors.items():
         series = MetricSeries.read_csv(Path(entry["runs"][0]) / "metrics.csv")
         assert (Path(entry["runs"][0]) / "mission.rrd").stat().st_size > 0, name  # every study run's recording
