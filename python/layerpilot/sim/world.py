@@ -64,7 +64,7 @@ class WorldConfig:
         check_range("ridge_height", self.ridge_height, 0.0, 1000.0)
         check_range("ridge_wavelength", self.ridge_wavelength, 20.0, 10000.0)
         check_range("fields", self.fields, 0, 100)
-        check_range("field_size_max", self.field_size_max, 10.0, self.size)
+        check_range("field_size_max", self.field_size_max, 10.0, self.size if self.fields else None)
         check_range("tall_stand_height", self.tall_stand_height, 0.0, 100.0)
         if self.tall_stand_height and self.tall_stand_height < self.tree_height_max:
             raise ValueError(f"tall_stand_height = {self.tall_stand_height} must be 0 or >= tree_height_max "
