@@ -186,8 +186,8 @@ def apply_overrides(mission: Mission, tables: dict[str, Any], overrides: list[Ov
             raise ConfigError(f"{o.flag} {o.value!r}: {reason}") from None
         _set(merged, o.key, o.value)
     mission = from_dict(Mission, merged, "mission")
+    mount = mission.decide.flown_behavior().camera_pitch_deg
     for o in overrides:
-        mount = mission.decide.flown_behavior().camera_pitch_deg
         if o.key == "sim.camera.pitch_deg" and mount is not None and mount != o.value:
             raise ConfigError(f"{o.flag} {o.value}: behavior {mission.decide.behavior!r} flies its own camera mount "
                               f"(camera_pitch_deg = {mount:g}); set it in a copy of the behavior file")

@@ -115,7 +115,8 @@ class World:
         self.terrain_res = c.size / n
         axis = -self.half + np.arange(n + 1) * self.terrain_res
         gx, gy = np.meshgrid(axis, axis)
-        # The harder worlds' options draw from their own generator: a world without them is the same as before.
+        # The harder worlds' options draw from a generator of their own: a seed's hills, clearings and tree
+        # places do not depend on them.
         extra = np.random.default_rng([c.seed, 1])
         self.heightfield = (self._hills(rng, gx, gy) + self._ridges(extra, gx, gy)).astype(np.float64)  # row = y
         self.clearings = self._clearings(rng)
