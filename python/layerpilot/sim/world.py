@@ -138,15 +138,9 @@ class World:
         c = self.config
         if not c.ridge_height:
             return np.zeros_like(x)
-        extent = self.half + c.ridge_wavelength
-
-        def crest(px: np.ndarray, py: np.ndarray, r: np.random.Generator) -> np.ndarray:
-            return (1.0 - np.abs(_value_noise(r, px, py, c.ridge_wavelength, extent))) ** 2
-
-        state = rng.bit_generator.state
-        h = crest(x, y, rng)
-        rng.bit_generator.state = state  # the same lattice for the launch point's height
-        return c.ridge_height * (h - crest(np.zeros(1), np.zeros(1), rng)[0])
+        px, py = np.append(np.ravel(x), 0.0), np.append(np.ravel(y), 0.0)  # the launch point last
+        crest = (1.0 - np.abs(_value_noise(rng, px, py, c.ridge_wavelength, self.half + c.ridge_wavelength))) ** 2
+        return c.ridge_height * (crest[:-1] - crest[-1]).reshape(np.shape(x))
 
     def terrain_height(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
         """Exact meshed terrain height at (x, y); points outside the world are clamped to its edge."""
