@@ -105,15 +105,15 @@ def test_photos_through_up_map_as_accurately_as_map_images(tmp_path) -> None:
     mission = tmp_path / "photos.toml"
     mission.write_text(f'vehicles = ["uav1"]\n[map_server]\nresolution = 0.5\nwindow = [-100.0, -100.0, 400, 400]\n'
                        f'snapshot = "{tmp_path / "map.ot"}"\n[camera]\nsource = "{BRIGHTON}"\npitch_deg = 90.0\n'
-                       'gimbal = false\nplay_rate = 3.0\n')
+                       'gimbal = false\nplay_rate = 3.0\n[depth]\nqueue_size = 12\n')  # the folder fits: none dropped
     up, lines = start_up(mission, endpoint(), tmp_path / "logs")
     try:
-        wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines[-10:]),
+        wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines),
                  "the depth node to take the 12 photos", timeout=300.0)
     finally:
         stop_up(up)
     depth = [line for line in lines if line.startswith("depth/uav1")][-1]
-    assert int(re.search(r" clouds=(\d+)", depth).group(1)) > 0, depth
+    assert int(re.search(r" clouds=(\d+)", depth).group(1)) > 0 and " dropped=0 " in depth, depth
     folder = read_folder(BRIGHTON)
     surface = read_reference(BRIGHTON / "model.laz", folder.origin)
     live = VoxelMap.load(tmp_path / "map.ot")

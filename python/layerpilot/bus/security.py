@@ -111,6 +111,7 @@ def access_control(table: dict[str, Grant]) -> dict:
         ids: list[str] = []
         for what, messages, flow, key_exprs in (
                 ("publish", ["put"], "ingress", g.publish),
+                ("listeners", ["declare_subscriber"], "egress", g.publish),  # who listens: a photo folder waits
                 ("subscribe", ["declare_subscriber"], "ingress", g.subscribe),
                 ("receive", ["put"], "egress", g.subscribe),
                 ("query", ["query"], "ingress", g.query),

@@ -7,7 +7,8 @@ frame ``i`` at ``file_start + i / fps``; a live frame at its arrival, moved onto
 clock by the offset learnt from the link node's pose stream (mission.camera_track.ClockOffset),
 less ``latency``; a photo at ``file_start`` plus its capture time after the first photo's, played at
 that pace (``play_rate`` times faster), its EXIF/XMP pose published first as the telemetry (pose)
-stream. A frame waits for a pose at or after its time while the pose stream keeps coming (one at
+stream; a folder starts playing once a subscriber (the depth node) listens for its frames, so
+that no photo goes out to nobody. A frame waits for a pose at or after its time while the pose stream keeps coming (one at
 least every ``max_gap`` seconds; a file's frames wait for the first pose too), gets the interpolated
 camera pose (mission.camera_track.PoseTrack) or is dropped with the reason counted, is undistorted with the
 calibration and goes out on ``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
@@ -88,6 +89,7 @@ class CameraNode:
         self._backoff = 0.5
         self._outage = False
         self._sub = None
+        self._frames_out: zenoh.Publisher | None = None  # a photo folder's: who listens for its frames
         self._open()
 
     # --- poses ----------------------------------------------------------------------------
@@ -95,6 +97,8 @@ class CameraNode:
     def start(self) -> None:
         self._sub = self.session.declare_subscriber(self.keys.pose, guarded(decode_state, self._on_pose,
                                                                             self.rejects, self.supervisor))
+        if self.player is not None:
+            self._frames_out = self.session.declare_publisher(self.keys.camera)
 
     def _on_pose(self, s: State, key: str) -> None:
         now = time.monotonic()
@@ -116,10 +120,11 @@ class CameraNode:
 
     def stop(self) -> None:
         self.stop_event.set()
-        if self._sub is not None:
-            self._sub.undeclare()
-            self._sub = None
         self.supervisor.join(timeout=self.settings.reconnect_max + 2.0)
+        for declared in (self._sub, self._frames_out):
+            if declared is not None:
+                declared.undeclare()
+        self._sub = self._frames_out = None
         if self._cap is not None:
             self._cap.release()
             self._cap = None
@@ -182,6 +187,7 @@ class CameraNode:
             self.stop_event.wait(WAKE_PERIOD)
             return True
         if index == 0:
+            self._await_listener()
             self._played_from = time.monotonic()
         due = self._played_from + (player.stamps[index] - player.stamps[0]) / self.settings.play_rate
         while not self.stop_event.is_set() and (wait := due - time.monotonic()) > 0:
@@ -202,6 +208,15 @@ class CameraNode:
         publish(self.session, self.keys.camera, encode_frame(FrameMessage(
             self.keys.vehicle, self.published, CameraFrame(frame.image, pose, frame.intrinsics, stamp))))
         return True
+
+    def _await_listener(self) -> None:
+        """Hold a folder's first photo until its frames have a subscriber (or the node stops)."""
+        if not self._frames_out.matching_status.matching:
+            _log.info("camera: waiting for a subscriber of %s before playing %s", self.keys.camera,
+                      self.settings.source)
+        while not (self._frames_out.matching_status.matching or self.stop_event.is_set()):
+            self.supervisor.beat("camera")
+            self.stop_event.wait(0.05)
 
     def _camera_pose(self, stamp: float):
         """Wait for a pose at or after ``stamp`` while poses keep coming (a file's frames also wait for the
