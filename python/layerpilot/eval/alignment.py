@@ -31,6 +31,7 @@ from layerpilot.grid import GridGeometry
 
 if TYPE_CHECKING:  # the C++ map is imported only where a map is used
     from layerpilot.map import VoxelMap
+    from layerpilot.map.columns import ColumnLayers
 
 OFFSET_KEYS = ["offset_x", "offset_y", "offset_z"]
 SCORE_NAMES = MAP_METRICS + [f"{k}_absolute" for k in MAP_METRICS] + OFFSET_KEYS
@@ -103,6 +104,31 @@ def _shifted(geometry: GridGeometry, offset: np.ndarray) -> GridGeometry:
                    origin_y=geometry.origin_y + float(offset[1]))
 
 
+@dataclass(frozen=True)
+class MapSnapshot:
+    """What the scores read of the two maps at one moment (copies): the scoring itself, the costly
+    nearest-voxel searches, can then run beside the mission while the maps change."""
+
+    now: float
+    offset: np.ndarray
+    gt: np.ndarray
+    views: tuple[tuple["ColumnLayers", np.ndarray], ...]  # (columns, voxel centres) absolute, then aligned
+    aoi: np.ndarray
+    d_v: float
+
+    def scores(self) -> dict[str, float]:
+        """Every name in ``SCORE_NAMES``: the aligned metrics, the absolute ones and the offset."""
+        metrics = [self._metrics(columns, est) for columns, est in self.views]
+        absolute, aligned = metrics[0], metrics[-1]
+        return {**aligned, **{f"{k}_absolute": v for k, v in absolute.items()},
+                **dict(zip(OFFSET_KEYS, (float(v) for v in self.offset)))}
+
+    def _metrics(self, columns: "ColumnLayers", est: np.ndarray) -> dict[str, float]:
+        area = area_metrics(columns, self.aoi, self.now)
+        voxels = voxel_metrics(est, self.gt, self.d_v).as_dict()
+        return {k: v for k, v in {**area.as_dict(), **voxels}.items() if k in MAP_METRICS}
+
+
 @dataclass
 class MapScorer:
     """The map metrics over a mission's area, both aligned (headline names) and absolute.
@@ -121,15 +147,9 @@ class MapScorer:
 
     names = SCORE_NAMES
 
-    def _metrics(self, est_map: "VoxelMap", gt: np.ndarray, now: float, offset: np.ndarray) -> dict[str, float]:
-        area = area_metrics(est_map.column_layers_for(_shifted(self.geometry, offset)), self.aoi, now)
-        est = est_map.voxels(self.box_min + offset, self.box_max + offset, self.min_occupancy).centers - offset
-        voxels = voxel_metrics(est, gt, self.d_v).as_dict()
-        return {k: v for k, v in {**area.as_dict(), **voxels}.items() if k in MAP_METRICS}
-
-    def __call__(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float,
-                 poses: tuple[Sequence[StampedPose], Sequence[StampedPose]] | None = None) -> dict[str, float]:
-        """Every name in ``SCORE_NAMES`` for the estimated map against the ground-truth one at ``now``.
+    def snapshot(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float,
+                 poses: tuple[Sequence[StampedPose], Sequence[StampedPose]] | None = None) -> MapSnapshot:
+        """The estimated and ground-truth maps at ``now``, aligned, as :meth:`MapSnapshot.scores` reads them.
 
         ``poses``: (true, placed) camera poses, the placed ones those the map's clouds were placed with;
         the offset is then theirs (0 while either is empty), else the maps' (``best_offset``)."""
@@ -145,7 +165,14 @@ class MapScorer:
         elif len(est) and len(gt):  # the first search with something to align is the coarse one
             self.offset = best_offset(est, gt, res, self.offset if self.searched else None, self.d_v)
             self.searched = True
-        absolute = self._metrics(est_map, gt, now, np.zeros(3))
-        aligned = absolute if not self.offset.any() else self._metrics(est_map, gt, now, self.offset)
-        return {**aligned, **{f"{k}_absolute": v for k, v in absolute.items()},
-                **dict(zip(OFFSET_KEYS, (float(v) for v in self.offset)))}
+        views = [(est_map.column_layers_for(self.geometry), est)]
+        if self.offset.any():
+            o = self.offset
+            views.append((est_map.column_layers_for(_shifted(self.geometry, o)),
+                          est_map.voxels(self.box_min + o, self.box_max + o, self.min_occupancy).centers - o))
+        return MapSnapshot(now, self.offset.copy(), gt, tuple(views), self.aoi, self.d_v)
+
+    def __call__(self, est_map: "VoxelMap", gt_map: "VoxelMap", now: float,
+                 poses: tuple[Sequence[StampedPose], Sequence[StampedPose]] | None = None) -> dict[str, float]:
+        """Every name in ``SCORE_NAMES`` for the estimated map against the ground-truth one at ``now``."""
+        return self.snapshot(est_map, gt_map, now, poses).scores()

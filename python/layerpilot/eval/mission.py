@@ -36,19 +36,20 @@ from __future__ import annotations
 
 import json
 import logging
+from collections import deque
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import Callable, TextIO, TypeVar
 
 import numpy as np
 
 from layerpilot.bus import layerset as wire
 from layerpilot.decide import area_geometry, zone_mask
 from layerpilot.depth.source import GroundTruthDepth
-from layerpilot.eval.alignment import MapScorer
+from layerpilot.eval.alignment import MapScorer, MapSnapshot
 from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
@@ -68,6 +69,7 @@ from layerpilot.progress import Progress
 from layerpilot.sim.simulator import Simulator
 
 _log = logging.getLogger("layerpilot.eval")
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -93,7 +95,7 @@ class MissionResult:
 
 
 class Stages:
-    """Work handed off the main thread, in order per lane; ``settle`` waits until every lane is done.
+    """Work handed off the main thread, in order per lane; ``settle`` waits until the given lanes are done.
 
     ``overlap`` False runs each job at once in the caller: the sequential order, for comparison.
     """
@@ -101,18 +103,25 @@ class Stages:
     def __init__(self, lanes: tuple[str, ...], overlap: bool) -> None:
         self._pools = {lane: ThreadPoolExecutor(1, thread_name_prefix=f"mission-{lane}") for lane in lanes} \
             if overlap else {}
-        self._pending: list[Future] = []
+        self._pending: dict[str, list[Future]] = {lane: [] for lane in lanes}
 
-    def submit(self, lane: str, job: Callable[[], None]) -> None:
+    def submit(self, lane: str, job: Callable[[], T]) -> Future:
+        """The job's future (done at once in the sequential order)."""
         if not self._pools:
-            job()
-        else:
-            self._pending.append(self._pools[lane].submit(job))
+            done: Future = Future()
+            done.set_result(job())
+            return done
+        future = self._pools[lane].submit(job)
+        self._pending[lane].append(future)
+        return future
 
-    def settle(self) -> None:
-        pending, self._pending = self._pending, []
-        for f in pending:
-            f.result()  # a job's exception is raised here, in the mission thread
+    def settle(self, *lanes: str) -> None:
+        """Wait for ``lanes`` (every lane when none is named); a job's exception is raised here, in the
+        mission thread."""
+        for lane in lanes or tuple(self._pending):
+            pending, self._pending[lane] = self._pending[lane], []
+            for f in pending:
+                f.result()
 
     def close(self) -> None:
         self.settle()
@@ -186,6 +195,7 @@ class LockstepMission:
         self.scorer = MapScorer(self.geometry, self.aoi, np.array([xmin, ymin, -1000.0]),
                                 np.array([xmax, ymax, 1000.0]))
         self.sampler = SeriesSampler(self.scorer.names, SAMPLE_INTERVAL)
+        self._scores: deque[tuple[float, Future]] = deque()  # samples taken, being scored
         self.frames = 0
         self.path: list[tuple[float, float]] = []
         self.records: list[dict] = []
@@ -207,7 +217,7 @@ class LockstepMission:
             self.view.start(self.pilot.behavior, self.mission.decide.home, self.geometry)
         ev = self.mission.evaluation
         sim_cfg = replace(self.mission.simulator, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
-        stages = Stages(("depth", "truth"), self.overlap)
+        stages = Stages(("depth", "truth", "score"), self.overlap)
         with Simulator(sim_cfg) as sim:
             host, port = sim.endpoint.addresses[0]
             link, frame = flight_link(self.mission, f"tcp:{host}:{port}"), sim.endpoint.ekf_frame
@@ -248,16 +258,19 @@ class LockstepMission:
                 frame, reference = capture.frame.seen_from(origin), capture.truth.seen_from(origin)
             if t >= next_layers - 1e-9:  # the map's layer set, through the wire codec: every cloud so far is in
                 next_layers += layer_period
-                stages.settle()
+                stages.settle("depth", "truth")
                 self._layers()
             self._pilot_step(link, position, t, round(100 * sim.endpoint.battery.remaining) / 100)
             if frame is not None:
                 self._frame(t, frame, reference, position, stages)
-            if self.sampler.due(t):
-                stages.settle()
-                self.sampler.maybe_sample(t, lambda: self._score(t))
+            if self.sampler.due(t):  # the maps as they are now; the scoring runs beside the flight
+                stages.settle("depth", "truth")
+                self.sampler.taken(t)
+                self._scores.append((t, stages.submit("score", self._snapshot(t).scores)))
                 if self.view is not None:
+                    self._record_scores(wait=True)
                     self.view.metrics(t, self.sampler.series.last())
+            self._record_scores()
             last = self.sampler.series.last() if len(self.sampler.series) else {}
             progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(self.records)}")
             if t >= ev.duration - 1e-9 or (pilot.ending and pilot.arrived(position)):
@@ -266,8 +279,9 @@ class LockstepMission:
             steps += 1
             t = steps * ev.step_s
         stages.settle()
+        self._record_scores(wait=True)
         if self.sampler.series.last()["t"] < t:
-            self.sampler.series.append(t, self._score(t))
+            self.sampler.series.append(t, self._snapshot(t).scores())
         progress.close(f"mapped {self.sampler.series.last()['percent_mapped']:.1f}% waypoints {len(self.records)}")
         return t, tuple(float(c) for c in position)
 
@@ -361,10 +375,16 @@ class LockstepMission:
         return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records), self.frames, depth.clouds,
                              wall_s, paths, self.inputs)
 
-    def _score(self, t: float) -> dict[str, float]:
-        """The map metrics, aligned by the common offset of the camera poses the clouds were placed with."""
+    def _snapshot(self, t: float) -> MapSnapshot:
+        """The maps to score, aligned by the common offset of the camera poses the clouds were placed with."""
         placed = self.pipeline.depth[self.vehicle].trajectory()
-        return self.scorer(self.map, self.gt, t, (self.camera_poses["truth"], placed))
+        return self.scorer.snapshot(self.map, self.gt, t, (self.camera_poses["truth"], placed))
+
+    def _record_scores(self, wait: bool = False) -> None:
+        """Append the finished samples to the series, in order (all of them with ``wait``)."""
+        while self._scores and (wait or self._scores[0][1].done()):
+            t, scores = self._scores.popleft()
+            self.sampler.series.append(t, scores.result())
 
     def _pose_errors(self, refined: list[tuple[float, Pose]]) -> dict[str, float]:
         """The camera poses as reported (``pose_raw_*``) and as the clouds were placed (``pose_refined_*``)

@@ -90,5 +90,10 @@ class SeriesSampler:
         if not self.due(t):
             return False
         self.series.append(t, compute())
-        self._next = (math.floor(t / self.interval + 1e-9) + 1) * self.interval
+        self.taken(t)
         return True
+
+    def taken(self, t: float) -> None:
+        """A sample was taken at ``t`` (its metrics appended by the caller, perhaps later): the next is due
+        one interval on."""
+        self._next = (math.floor(t / self.interval + 1e-9) + 1) * self.interval
