@@ -267,9 +267,6 @@ class LockstepMission:
                 stages.settle("depth", "truth")
                 self.sampler.taken(t)
                 self._scores.append((t, stages.submit("score", self._snapshot(t).scores)))
-                if self.view is not None:
-                    self._record_scores(wait=True)
-                    self.view.metrics(t, self.sampler.series.last())
             self._record_scores()
             last = self.sampler.series.last() if len(self.sampler.series) else {}
             progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(self.records)}")
@@ -319,7 +316,8 @@ class LockstepMission:
         self.camera_poses["truth"].append((frame.stamp, reference.pose))  # this exposure's truth, by the frame's stamp
         self.camera_poses["raw"].append((frame.stamp, frame.pose))
         if self.view is not None:
-            stages.settle()  # the view reads the map
+            if self.view.reads_map(t):
+                stages.settle("depth", "truth")
             self.view.frame(t, frame, position, self.map)
         max_range = self.mission.depth.max_depth
         poses, self._telemetry = self._telemetry, []
@@ -385,6 +383,8 @@ class LockstepMission:
         while self._scores and (wait or self._scores[0][1].done()):
             t, scores = self._scores.popleft()
             self.sampler.series.append(t, scores.result())
+            if self.view is not None:
+                self.view.metrics(t, self.sampler.series.last())
 
     def _pose_errors(self, refined: list[tuple[float, Pose]]) -> dict[str, float]:
         """The camera poses as reported (``pose_raw_*``) and as the clouds were placed (``pose_refined_*``)

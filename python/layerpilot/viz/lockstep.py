@@ -50,6 +50,10 @@ class LockstepView:
         self.scene.area(area_outline(behavior.area.shape, behavior.area.radius, behavior.area.center or home,
                                      behavior.area.polygon))
 
+    def reads_map(self, t: float) -> bool:
+        """Whether the frame at ``t`` logs map images or voxels (the evaluator lets the map settle first)."""
+        return t >= self._next_image - 1e-9 or t >= self._next_map - 1e-9
+
     def frame(self, t: float, frame: CameraFrame, body: np.ndarray, voxel_map: VoxelMap) -> None:
         """One camera frame (map frame) with the drone's position ``body``; images and map on their periods."""
         self.scene.at(t)
