@@ -17,8 +17,9 @@ once it turns home for the battery the mission ends when it is there (``ended`` 
 
 Stages overlap where the data allows (``evaluation.overlap``): a frame's stereo and insertion run
 on one worker and the ground-truth reference on another while the simulator flies on and renders
-the next frame; the main thread waits for them only where their result is read (the next layer
-set, a metric sample, the end), so the results are byte-identical to the sequential order.
+the next frame, and a metric sample is scored on a third from a snapshot of the maps; the main
+thread waits for them only where their result is read (the next layer set, a metric sample's
+snapshot, a view's map image, the end), so the results are byte-identical to the sequential order.
 
 Frames: as in a live mission, the map frame is the autopilot's local frame, with its origin at the
 EKF origin on the ground at home (the decide behavior's altitude is a height above home). The
