@@ -37,9 +37,9 @@ from __future__ import annotations
 
 import json
 import logging
-from collections import deque
 import threading
 import time
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path

@@ -52,13 +52,19 @@ class LockstepView:
 
     def reads_map(self, t: float) -> bool:
         """Whether the frame at ``t`` logs map images or voxels (the evaluator lets the map settle first)."""
-        return t >= self._next_image - 1e-9 or t >= self._next_map - 1e-9
+        return self._images_due(t) or self._map_due(t)
+
+    def _images_due(self, t: float) -> bool:
+        return t >= self._next_image - 1e-9
+
+    def _map_due(self, t: float) -> bool:
+        return t >= self._next_map - 1e-9
 
     def frame(self, t: float, frame: CameraFrame, body: np.ndarray, voxel_map: VoxelMap) -> None:
         """One camera frame (map frame) with the drone's position ``body``; images and map on their periods."""
         self.scene.at(t)
         self.scene.pose(Pose(np.asarray(body, np.float64)))
-        if t >= self._next_image - 1e-9:
+        if self._images_due(t):
             self._next_image = t + IMAGE_PERIOD
             self.scene.path()
             self.scene.camera(frame)
@@ -67,7 +73,7 @@ class LockstepView:
             self.scene.layers({"color": cl.color, "elevation": np.where(seen, cl.elevation, np.nan),
                                "time_since_seen": np.where(seen, t - cl.last_seen, np.nan),
                                "distance": np.where(seen, cl.min_distance, np.nan)}, self.geometry)
-        if t >= self._next_map - 1e-9:  # the first map as soon as there is one, then every MAP_PERIOD
+        if self._map_due(t):  # the first map as soon as there is one, then every MAP_PERIOD
             x0, x1, y0, y1 = self.geometry.extent
             box = np.array([x0, y0, BOX_HEIGHT[0]]), np.array([x1, y1, BOX_HEIGHT[1]])
             if self.scene.voxels(voxel_map.voxels(*box), t, voxel_map.resolution):
