@@ -20,6 +20,8 @@ from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.mission.depth_service import DepthService, DepthServiceConfig
 from layerpilot.camera import CameraConfig
 from layerpilot.sim import Renderer, World, WorldConfig
+from layerpilot.sim.pose_errors import PoseErrors
+from layerpilot.sim.sensors import PROFILES
 from layerpilot.camera import camera_pose
 
 SIZE = (320, 240)
@@ -93,14 +95,18 @@ def _weaving_flight(t: np.ndarray, start=(-60.0, 40.0), speed: float = 5.0, ampl
     return xy, heading
 
 
-def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0, lead: float = 1.0):
+def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0, lead: float = 1.0,
+                   sensors: str = "perfect"):
     """Events of the weaving flight with a camera clock ``offset`` seconds behind the telemetry:
     ("pose", stamp, body pose) at ``rate`` Hz, running ``lead`` seconds ahead of ("frame", CameraFrame)
-    at 1 Hz, each frame stamped on the camera's clock and carrying the telemetry's pose at that stamp."""
+    at 1 Hz, each frame stamped on the camera's clock and carrying the telemetry's pose at that stamp.
+    The telemetry's heading carries the ``sensors`` profile's heading error (the frames' poses do not)."""
     t = np.arange(0.0, frames + 2.0, 1.0 / rate)
     xy, heading = _weaving_flight(t)
     altitude = float(world.terrain_height(*xy[0])) + 45.0
-    body = [Pose.from_euler(0.0, 0.0, float(h), (x, y, altitude)) for (x, y), h in zip(xy, heading)]
+    errors = PoseErrors(PROFILES[sensors], np.random.default_rng(0))
+    reported = heading + np.array([errors.step(1.0 / rate).yaw for _ in t])
+    body = [Pose.from_euler(0.0, 0.0, float(h), (x, y, altitude)) for (x, y), h in zip(xy, reported)]
     sent = 0
     with Renderer(world, CameraConfig(width=SIZE[0], height=SIZE[1], pitch_deg=60.0)) as r:
         for k in range(1, frames):
@@ -119,12 +125,12 @@ def _offset_flight(world, offset: float, frames: int = 24, rate: float = 20.0, l
             yield "frame", dataclasses.replace(truth, pose=camera_pose(pos, float(yaw) + math.pi / 2, 60.0), stamp=stamp)
 
 
-def test_time_offset_estimate_converges_to_the_simulated_offset(world):
-    """Frames stamped 120 ms behind the telemetry, their reported poses read at the wrong time: the
-    service learns the offset from how the camera turned, within 20 ms."""
-    offset = 0.12
+@pytest.mark.parametrize("offset, sensors", [(0.12, "perfect"), (0.25, "degraded")])
+def test_time_offset_estimate_converges_to_the_simulated_offset(world, offset, sensors):
+    """Frames stamped behind the telemetry, their reported poses read at the wrong time: the service learns
+    the offset from how the camera turned, within 20 ms, also through the degraded profile's heading error."""
     service = DepthService(DepthServiceConfig())
-    for kind, *event in _offset_flight(world, offset):
+    for kind, *event in _offset_flight(world, offset, sensors=sensors):
         if kind == "pose":
             service.push_pose(*event)
         else:

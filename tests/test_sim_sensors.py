@@ -77,12 +77,19 @@ def test_pose_error_std_and_correlation_time_match_the_profile(name, chains, rel
         assert 0.3 < np.mean(final > 0) < 0.7
 
 
-def test_the_position_error_moves_smoothly_between_reports():
-    """Low-passed: between 10 Hz reports the drift moves ~1 cm, not the 7 cm of a first-order process."""
+def test_the_pose_error_moves_smoothly_between_reports():
+    """Low-passed, as an EKF's outputs are: between 10 Hz reports the drift moves ~1 cm, not the 7 cm of a
+    first-order process, and the heading 0.01 degrees, not 0.1; a second apart the heading error differs by
+    about 0.17 degrees (first-order: 0.37), which is what lets the images' turns tell the camera's clock."""
     errors = PoseErrors(CONSUMER, np.random.default_rng([0, 1]))
-    drift = np.array([errors.step(0.1).drift[:2] for _ in range(3000)])
+    series = [errors.step(0.1) for _ in range(6000)]
+    drift = np.array([e.drift[:2] for e in series])
     assert np.diff(drift, axis=0).std() < 0.03
     assert drift.std() > 0.5  # while it wanders by metres
+    heading = np.degrees([e.yaw for e in series])
+    assert np.diff(heading).std() < 0.03
+    assert (heading[10:] - heading[:-10]).std() < 0.25
+    assert heading.std() > 1.0  # while it wanders by degrees
 
 
 def test_consumer_is_at_least_as_hard_as_an_m8_class_receiver():

@@ -2,10 +2,12 @@
 
 Each error is a first-order Gauss-Markov process started from its stationary
 distribution, so its statistics hold from the first step: standard deviation sigma,
-autocorrelation exp(-|dt| / tau). Position errors are in addition low-passed over a few
-seconds, as the receiver's and the EKF's filters smooth them (a first-order process
-alone would move like a random walk from one 10 Hz report to the next, which no EKF
-output does); their standard deviation stays sigma and their autocorrelation is
+autocorrelation exp(-|dt| / tau), in addition low-passed over a few seconds, as the
+receiver's and the EKF's filters smooth them: a first-order process alone would move like
+a random walk from one 10 Hz report to the next, which no EKF output does (the attitude is
+the gyros integrated between slow corrections; a random-walk heading error turned the
+telemetry 0.2 degrees between 20 Hz steps of the degraded profile, so no two frames agreed
+on how the camera turned). The standard deviation stays sigma and the autocorrelation is
 exp(-|dt| / tau) beyond a few smoothing times. Barometric drift grows linearly with time.
 """
 
@@ -18,19 +20,6 @@ import numpy as np
 from scipy.linalg import expm
 
 from layerpilot.sim.sensors import SensorProfile
-
-
-class GaussMarkov:
-    """x(t + dt) = a x(t) + sigma sqrt(1 - a^2) w, a = exp(-dt / tau), w ~ N(0, 1): exact for any dt."""
-
-    def __init__(self, sigma: float, tau: float, rng: np.random.Generator, size: int = 1) -> None:
-        self.sigma, self.tau, self._rng = sigma, tau, rng
-        self.value = rng.normal(0.0, sigma, size)
-
-    def step(self, dt: float) -> np.ndarray:
-        a = math.exp(-dt / self.tau)
-        self.value = a * self.value + self.sigma * math.sqrt(1.0 - a * a) * self._rng.normal(0.0, 1.0, self.value.size)
-        return self.value
 
 
 class SmoothedGaussMarkov:
@@ -86,8 +75,9 @@ class PoseErrors:
         self._rng = rng
         self._horizontal = SmoothedGaussMarkov(p.horizontal_sigma_m, p.horizontal_tau_s, p.position_smoothing_s, rng, 2)
         self._vertical = SmoothedGaussMarkov(p.vertical_sigma_m, p.vertical_tau_s, p.position_smoothing_s, rng)
-        self._tilt = GaussMarkov(math.radians(p.tilt_sigma_deg), p.tilt_tau_s, rng, 2)
-        self._heading = GaussMarkov(math.radians(p.heading_sigma_deg), p.heading_tau_s, rng)
+        self._tilt = SmoothedGaussMarkov(math.radians(p.tilt_sigma_deg), p.tilt_tau_s, p.attitude_smoothing_s, rng, 2)
+        self._heading = SmoothedGaussMarkov(math.radians(p.heading_sigma_deg), p.heading_tau_s,
+                                            p.attitude_smoothing_s, rng)
         self._baro_rate = p.baro_drift_m_per_min / 60.0 * (1.0 if rng.random() < 0.5 else -1.0)
         self._elapsed = 0.0
         self.current = self._compose(np.zeros(2))

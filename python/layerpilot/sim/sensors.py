@@ -54,7 +54,8 @@ class SensorProfile:
     """Errors of the reported pose (EKF), the camera's clock and its images; all zero = perfect sensors.
 
     Position and attitude errors are first-order Gauss-Markov processes: stationary standard
-    deviation ``*_sigma_*``, autocorrelation exp(-|dt| / ``*_tau_s``).
+    deviation ``*_sigma_*``, autocorrelation exp(-|dt| / ``*_tau_s``), low-passed over
+    ``*_smoothing_s`` as an EKF's outputs are.
     """
 
     horizontal_sigma_m: float = 0.0    # GNSS/EKF horizontal error per axis (east, north), Gauss-Markov
@@ -69,6 +70,7 @@ class SensorProfile:
     heading_sigma_deg: float = 0.0     # heading error, Gauss-Markov around the bias
     heading_tau_s: float = 60.0
     heading_bias_deg: float = 0.0      # constant heading error
+    attitude_smoothing_s: float = 2.0  # the EKF's low-pass on the attitude error (gyros integrated between corrections)
     clock_offset_s: float = 0.0        # the camera's stamps run this far behind the telemetry's clock
     clock_jitter_s: float = 0.0        # standard deviation of each stamp around that offset
     trigger_jitter_s: float = 0.0      # exposure starts up to this long (uniform) after the stamped trigger
@@ -86,6 +88,7 @@ class SensorProfile:
         for name in ("horizontal_tau_s", "vertical_tau_s", "tilt_tau_s", "heading_tau_s"):
             check_range(name, getattr(self, name), 0.1, 1e5)
         check_range("position_smoothing_s", self.position_smoothing_s, 0.1, 60.0)
+        check_range("attitude_smoothing_s", self.attitude_smoothing_s, 0.1, 60.0)
         check_range("baro_drift_m_per_min", self.baro_drift_m_per_min, 0.0, 10.0)
         check_range("tilt_sigma_deg", self.tilt_sigma_deg, 0.0, 10.0)
         check_range("heading_sigma_deg", self.heading_sigma_deg, 0.0, 45.0)
