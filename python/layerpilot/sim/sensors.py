@@ -25,7 +25,9 @@ numbers come from:
   (1 hPa ~ 8 m; EK3_HGT_M_NSE default 2 m) -> 0.3 m/min. Roll and pitch 0.5 deg
   (accelerometer bias and manoeuvre errors of MEMS IMUs), heading 2 deg with a 2 deg
   bias (compass calibration and motor interference; EK3_YAW_M_NSE default 0.5 rad is
-  the filter's own, much looser, assumption). Camera clock 100 ms behind the telemetry
+  the filter's own, much looser, assumption); position and attitude errors low-passed over
+  2 s (the EKF integrates the gyros between corrections: its attitude does not jump between
+  reports). Camera clock 100 ms behind the telemetry
   with 10 ms jitter and up to 20 ms trigger latency (UVC/MIPI capture latency, MAVLink
   telemetry latency and time_boot_ms alignment on a companion computer). Images: 1/250 s
   exposure, +-0.15 EV auto-exposure steps, 2 DN sensor noise (8-bit, base ISO), JPEG 85,
