@@ -108,8 +108,12 @@ def test_photos_through_up_map_as_accurately_as_map_images(tmp_path) -> None:
                        'gimbal = false\nplay_rate = 3.0\n[depth]\nqueue_size = 12\n')  # the folder fits: none dropped
     up, lines = start_up(mission, endpoint(), tmp_path / "logs")
     try:
-        wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines),
-                 "the depth node to take the 12 photos", timeout=300.0)
+        try:
+            wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines),
+                     "the depth node to take the 12 photos", timeout=600.0)
+        except AssertionError as exc:  # say how far each node got
+            last = {line.split()[0]: line for line in lines if line.strip()}
+            raise AssertionError(f"{exc}; last lines: {list(last.values())[-6:]}") from None
     finally:
         stop_up(up)
     depth = [line for line in lines if line.startswith("depth/uav1")][-1]
