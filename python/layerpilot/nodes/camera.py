@@ -9,9 +9,10 @@ less ``latency``; a photo at ``file_start`` plus its capture time after the firs
 that pace (``play_rate`` times faster), its EXIF/XMP pose published first as the telemetry (pose)
 stream; a folder starts playing once a subscriber (the depth node) listens for its frames, so
 that no photo goes out to nobody. A frame waits for a pose at or after its time while the pose
-stream keeps coming (one at least every ``max_gap`` seconds; a file's frames wait for the first pose too), gets the interpolated
-camera pose (mission.camera_track.PoseTrack) or is dropped with the reason counted, is undistorted with the
-calibration and goes out on ``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
+stream keeps coming (one at least every ``max_gap`` seconds; a file's frames wait for the first
+pose too), gets the interpolated camera pose (mission.camera_track.PoseTrack) or is dropped with
+the reason counted, is undistorted with the calibration and goes out on
+``layerpilot/<vehicle>/camera``. A file that ends stops the node (exit
 0, saying so); a device or stream that stops giving frames is reopened with a doubling wait up to
 ``reconnect_max``; a photo folder that has played leaves the node idle (``up`` does not replay it).
 """

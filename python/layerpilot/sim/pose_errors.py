@@ -5,9 +5,9 @@ distribution, so its statistics hold from the first step: standard deviation sig
 autocorrelation exp(-|dt| / tau), in addition low-passed over a few seconds, as the
 receiver's and the EKF's filters smooth them: a first-order process alone would move like
 a random walk from one 10 Hz report to the next, which no EKF output does (the attitude is
-the gyros integrated between slow corrections; a random-walk heading error turned the
-telemetry 0.2 degrees between 20 Hz steps of the degraded profile, so no two frames agreed
-on how the camera turned). The standard deviation stays sigma and the autocorrelation is
+the gyros integrated between slow corrections; a random-walk heading error would turn the
+degraded profile's telemetry 0.2 degrees between 20 Hz steps and hide the camera's turns
+from the clock-offset estimate). The standard deviation stays sigma and the autocorrelation is
 exp(-|dt| / tau) beyond a few smoothing times. Barometric drift grows linearly with time.
 """
 

@@ -27,9 +27,9 @@ numbers come from:
   bias (compass calibration and motor interference; EK3_YAW_M_NSE default 0.5 rad is
   the filter's own, much looser, assumption); position and attitude errors low-passed over
   2 s (the EKF integrates the gyros between corrections: its attitude does not jump between
-  reports). Camera clock 100 ms behind the telemetry
-  with 10 ms jitter and up to 20 ms trigger latency (UVC/MIPI capture latency, MAVLink
-  telemetry latency and time_boot_ms alignment on a companion computer). Images: 1/250 s
+  reports). Camera clock 100 ms behind the telemetry with 10 ms jitter and up to 20 ms
+  trigger latency (UVC/MIPI capture latency, MAVLink telemetry latency and time_boot_ms
+  alignment on a companion computer). Images: 1/250 s
   exposure, +-0.15 EV auto-exposure steps, 2 DN sensor noise (8-bit, base ISO), JPEG 85,
   a wide lens with k1 = -0.05, k2 = 0.01 calibrated 2 % off.
 * ``degraded``: a poor day for the same hardware - multipath near trees, an uncalibrated
