@@ -173,19 +173,23 @@ def test_the_depth_node_hears_the_pose_stream_and_reports_the_refinement(world):
     node = DepthNode(node_session, "uav1", Mission())
     node.start()
     keys = Keys("uav1")
+    poses, camera = client.declare_publisher(keys.pose), client.declare_publisher(keys.camera)
     try:
-        time.sleep(0.5)
+        end = time.monotonic() + 30  # a put before the node's subscribers are matched is lost
+        while not (poses.matching_status.matching and camera.matching_status.matching) and time.monotonic() < end:
+            time.sleep(0.02)
         seq = 0
         for kind, *event in _offset_flight(world, 0.12):
             if kind == "pose":
-                client.put(keys.pose, encode_state(State(event[0], "uav1", event[1])))
+                poses.put(encode_state(State(event[0], "uav1", event[1])))
                 continue
             seq += 1
             time.sleep(0.05)  # the poses before the frame arrive first
-            client.put(keys.camera, encode_frame(FrameMessage("uav1", seq, event[0])))
+            camera.put(encode_frame(FrameMessage("uav1", seq, event[0])))
             end = time.monotonic() + 30
             while node.status().get("frames", 0) < seq and time.monotonic() < end:
                 time.sleep(0.02)
+            assert node.status().get("frames", 0) == seq, f"frame {seq} not handled in 30 s: {node.status()}"
         status = node.status()
     finally:
         node.stop()
