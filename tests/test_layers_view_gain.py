@@ -116,3 +116,25 @@ def test_the_registered_layer_uses_the_heading_rule_and_needs_a_view() -> None:
     assert _at(compute_layers(cols, target, ["view_gain"]).layers["view_gain"], 0, 0) < 1e-3
     with pytest.raises(ValueError, match="view_gain: the layer context needs the camera view"):
         compute_layers(cols, LayerContext(now=NOW), ["view_gain"])
+
+
+@pytest.mark.parametrize("heading", ["target", "side", "fixed", "center"])
+@pytest.mark.parametrize("shape, resolution", [((240, 240), 1.0), ((201, 317), 1.0), ((97, 103), 2.0)])
+def test_a_heading_computed_only_where_the_working_grid_reads_it_gives_the_same_layer(heading, shape, resolution):
+    """The layer asks for the heading at the working grid's cells only; it must be bit for bit the layer
+    from the heading of every cell (a grid that is no multiple of the working cell included)."""
+    from layerpilot.layers.view_gain import heading_yaw
+
+    rng = np.random.default_rng(3)
+    observed = rng.random(shape) < 0.5
+    seen = np.where(observed, rng.random(shape) * 500, np.nan)
+    top = np.where(rng.random(shape) < 0.9, rng.random(shape) * 30, np.nan)
+    aoi = rng.random(shape) < 0.8
+    xs, ys = np.meshgrid((np.arange(shape[1]) + 0.5) * resolution - 60, (np.arange(shape[0]) + 0.5) * resolution - 60)
+    view = CameraView(50.0, 60.0, 90.0, VFOV, 100.0, heading=heading, yaw=0.3, center=(3.0, 4.0))
+    drone = (10.0, -5.0, 50.0)
+    every_cell = heading_yaw(heading, drone, xs, ys, 0.3, (3.0, 4.0))
+    where_read = view_gain(observed, seen, top, aoi, NOW, resolution, view,
+                           lambda r, c: heading_yaw(heading, drone, xs[r, c], ys[r, c], 0.3, (3.0, 4.0)))
+    assert where_read.tobytes() == view_gain(observed, seen, top, aoi, NOW, resolution, view, every_cell).tobytes()
+    assert where_read.max() > 0.1

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -168,10 +170,13 @@ def visible_distance(top: np.ndarray, height: float, yaw: float, cell: float) ->
 
 
 def view_gain(observed: np.ndarray, last_seen: np.ndarray, top: np.ndarray, aoi: np.ndarray, now: float,
-              resolution: float, view: CameraView, yaw: np.ndarray | float, stale_s: float = 300.0) -> np.ndarray:
+              resolution: float, view: CameraView, yaw: float | np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray],
+              stale_s: float = 300.0) -> np.ndarray:
     """The layer: fraction of the candidate's footprint worth seeing, float32 in [0, 1].
 
-    ``yaw``: the camera's heading at each candidate, one number or a (h, w) array.
+    ``yaw``: the camera's heading at each candidate: one number, a (h, w) array, or a function of
+    (rows, cols) index arrays giving it at those cells only (the working grid needs one cell in
+    ``WORK_CELL / resolution`` squared, so the heading is computed where it is used).
     """
     if observed.ndim != 2 or observed.dtype != np.bool_:
         raise ValueError(f"observed: expected a 2D bool array, got {observed.shape} {observed.dtype}")
@@ -186,11 +191,15 @@ def view_gain(observed: np.ndarray, last_seen: np.ndarray, top: np.ndarray, aoi:
     weights = cv2.resize(target_weights(observed, last_seen, aoi, now, stale_s), small, interpolation=cv2.INTER_AREA)
     tops = cv2.resize(np.where(np.isfinite(top), top, np.nan).astype(np.float32), small,
                       interpolation=cv2.INTER_NEAREST)
+    if callable(yaw):
+        rows, cols = nearest_cells((h, w), small)
+        yaw = np.asarray(yaw(rows[:, None], cols[None, :]), np.float32)
+    elif np.ndim(yaw) != 0:
+        yaw = cv2.resize(np.asarray(yaw, np.float32), small, interpolation=cv2.INTER_NEAREST)
     if np.ndim(yaw) == 0:
         gain = _gain_one(weights, tops, view, float(yaw), cell)
     else:
-        yaw_small = cv2.resize(np.asarray(yaw, np.float32), small, interpolation=cv2.INTER_NEAREST)
-        sector = np.mod(np.round(yaw_small / (2 * math.pi / SECTORS)), SECTORS).astype(np.int32)
+        sector = np.mod(np.round(yaw / (2 * math.pi / SECTORS)), SECTORS).astype(np.int32)
         gain = np.zeros(weights.shape, np.float32)
         for k in np.unique(sector):
             one = _gain_one(weights, tops, view, 2 * math.pi * k / SECTORS, cell)
@@ -199,22 +208,44 @@ def view_gain(observed: np.ndarray, last_seen: np.ndarray, top: np.ndarray, aoi:
     return np.clip(out, 0.0, 1.0, out=out)
 
 
+@lru_cache(maxsize=16)
+def nearest_cells(shape: tuple[int, int], small: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The rows and columns of a ``shape`` grid that OpenCV's nearest-neighbour resize to ``small``
+    (width, height) reads: the cells it would copy, found by resizing their indices."""
+    h, w = shape
+    cols = cv2.resize(np.arange(w, dtype=np.int32)[None, :], (small[0], 1), interpolation=cv2.INTER_NEAREST)[0]
+    rows = cv2.resize(np.arange(h, dtype=np.int32)[:, None], (1, small[1]), interpolation=cv2.INTER_NEAREST)[:, 0]
+    for a in (rows, cols):
+        a.setflags(write=False)
+    return rows, cols
+
+
 def _gain_one(weights: np.ndarray, tops: np.ndarray, view: CameraView, yaw: float, cell: float) -> np.ndarray:
-    mask, ground = footprint(view, yaw, cell)
-    total = float(mask.sum())
+    total, bands = _bands(view, yaw, cell)
     if total == 0:
         return np.zeros(weights.shape, np.float32)
     reach = visible_distance(tops, view.height, yaw, cell)
-    edges = np.linspace(0.0, view.reach, BANDS + 1)
     gain = np.zeros(weights.shape, np.float32)
-    for near, far in zip(edges[:-1], edges[1:]):
-        band = mask * ((ground >= near) & (ground < far if far < edges[-1] else ground <= far))
-        if not band.any():
-            continue
+    for far, band in bands:
         seen = np.where(reach >= far, weights, np.float32(0))
         gain += cv2.filter2D(seen, cv2.CV_32F, band, borderType=cv2.BORDER_CONSTANT)
     gain *= np.float32(1.0 / total)
     return gain
+
+
+@lru_cache(maxsize=64)
+def _bands(view: CameraView, yaw: float, cell: float) -> tuple[float, tuple[tuple[float, np.ndarray], ...]]:
+    """The footprint's size and its distance bands (far edge, kernel), the empty ones left out: the
+    same few headings and views come back every tick."""
+    mask, ground = footprint(view, yaw, cell)
+    edges = np.linspace(0.0, view.reach, BANDS + 1)
+    bands = []
+    for near, far in zip(edges[:-1], edges[1:]):
+        band = mask * ((ground >= near) & (ground < far if far < edges[-1] else ground <= far))
+        if band.any():
+            band.setflags(write=False)
+            bands.append((float(far), band))
+    return float(mask.sum()), tuple(bands)
 
 
 def layer(columns, voxel_map, context) -> np.ndarray:
@@ -225,6 +256,9 @@ def layer(columns, voxel_map, context) -> np.ndarray:
     g = columns.geometry
     xs, ys = g.cell_centers()
     v = context.view
-    yaw = heading_yaw(v.heading, context.position, xs, ys, v.yaw, v.center)
+
+    def yaw(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return heading_yaw(v.heading, context.position, xs[rows, cols], ys[rows, cols], v.yaw, v.center)
+
     return view_gain(columns.observed, columns.last_seen, columns.elevation, context.aoi, context.now,
                      g.resolution, context.view, yaw, context.options.view_stale_s)
