@@ -13,7 +13,7 @@ from layerpilot.eval.alignment import MapScorer
 from layerpilot.eval.metrics import disk_mask
 from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.series import SeriesSampler
-from layerpilot.eval.summary import mean_spread, write_run_report, write_study_report
+from layerpilot.eval.summary import mean_spread, metric_plots, write_run_report, write_study_report
 from layerpilot.geometry import Pose
 from layerpilot.grid import GridGeometry
 
@@ -71,7 +71,10 @@ def test_run_report_has_every_section_and_sensible_values(tmp_path) -> None:
     for section in ["Final metrics", "Settings", "Metrics over time", "Flight path", "Final layers"]:
         assert f"<h2>{section}</h2>" in page
     images = re.findall(r"base64,([A-Za-z0-9+/=]+)", page)
-    assert len(images) == len(series.names) + 2
+    plots = metric_plots(series.names)  # each metric beside its absolute twin, the offset's axes together
+    assert sorted(c for _, lines, _ in plots for c in lines.values()) == sorted(series.names)
+    assert {"aligned to the truth": "f_score", "absolute": "f_score_absolute"} in [lines for _, lines, _ in plots]
+    assert len(images) == len(plots) + 2 and len(plots) < len(series.names)
     assert all(base64.b64decode(i)[:8] == b"\x89PNG\r\n\x1a\n" for i in images)
     assert (tmp_path / "run" / "metrics.csv").read_text().startswith("t,percent_mapped,")
     assert final["offset_z"] == 0.0 and final["f_score"] == final["f_score_absolute"]  # zero-mean noise: no offset

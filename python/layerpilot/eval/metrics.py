@@ -107,7 +107,8 @@ def nearest_distances(points: np.ndarray, reference: np.ndarray, max_distance: f
     if len(pts) == 0 or len(ref) == 0:
         return np.full(len(pts), np.inf)
     # the tree keeps neighbours strictly nearer than its bound: one ulp more keeps max_distance itself
-    distance, _ = cKDTree(ref).query(pts, k=1, distance_upper_bound=float(np.nextafter(max_distance, np.inf)))
+    tree = cKDTree(ref, leafsize=32, balanced_tree=False)  # built faster; the same exact distances
+    distance, _ = tree.query(pts, k=1, distance_upper_bound=float(np.nextafter(max_distance, np.inf)))
     return distance
 
 

@@ -49,6 +49,23 @@ def label(name: str) -> str:
     return LABELS.get(name) or POSE_COLUMNS.get(name) or OFFSET_COLUMNS.get(name, name)
 
 
+def metric_plots(names: Sequence[str]) -> list[tuple[str, dict[str, str], str]]:
+    """A run's plots of its series: (file stem, {line: column}, caption). A metric and its ``*_absolute``
+    twin share a plot, and so do the offset's axes: read side by side, and half the plots to draw."""
+    offsets = [n for n in names if n.startswith("offset_")]
+    plots = []
+    for name in names:
+        if name.endswith(ABSOLUTE) and name[: -len(ABSOLUTE)] in names or name in offsets[1:]:
+            continue
+        if name in offsets:
+            plots.append(("offset", {n[len("offset_"):]: n for n in offsets}, "map offset, estimated minus true (m)"))
+        elif (twin := name + ABSOLUTE) in names:
+            plots.append((name, {"aligned to the truth": name, "absolute": twin}, label(name)))
+        else:
+            plots.append((name, {"": name}, label(name)))
+    return plots
+
+
 def final_table(final: Mapping[str, float]) -> tuple[list[str], list[list[Any]]]:
     """Headers and rows of a run's final metrics: each metric beside its ``*_absolute`` twin when there is one."""
     names = [k for k in final if k != "t" and not (k.endswith(ABSOLUTE) and k[: -len(ABSOLUTE)] in final)]
@@ -95,8 +112,8 @@ def write_run_report(
     report.heading("Settings")
     report.table(["setting", "value"], [[k, v] for k, v in settings.items()])
     report.heading("Metrics over time")
-    for name in series.names:
-        report.image(plot_metric({title: [series]}, name, plots / f"metric_{name}.png"), label(name))
+    for name, lines, caption in metric_plots(series.names):
+        report.image(plot_metric({title: [series]}, lines, plots / f"metric_{name}.png", caption), caption)
     report.heading("Flight path")
     report.image(
         plot_flight_path(layers, path_xy, aoi, plots / "flight_path.png", title),

@@ -38,27 +38,35 @@ def _save(fig: plt.Figure, path: str | os.PathLike) -> Path:
     return path
 
 
-def plot_metric(runs: Mapping[str, Sequence[MetricSeries]], metric: str, path: str | os.PathLike) -> Path:
-    """One metric over time; one line per label (mean over its runs, min-max band if several)."""
+def plot_metric(runs: Mapping[str, Sequence[MetricSeries]], metric: str | Mapping[str, str],
+                path: str | os.PathLike, ylabel: str | None = None) -> Path:
+    """A metric over time, one line per label (mean over its runs, min-max band if several).
+
+    ``metric``: a column, or {line name: column} to draw several columns of each label on one plot
+    (a metric beside its absolute twin, the offset's three axes)."""
     if not runs:
         raise ValueError("runs: nothing to plot")
+    columns = {"": metric} if isinstance(metric, str) else dict(metric)
     fig, ax = plt.subplots(figsize=(7, 4))
     for label, series in runs.items():
         if not series:
             raise ValueError(f"runs: {label!r} has no series")
         n = min(len(s) for s in series)
         t = series[0].column("t")[:n]
-        values = np.array([s.column(metric)[:n] for s in series])
-        with warnings.catch_warnings():  # all-NaN samples (nothing mapped yet) stay NaN, silently
-            warnings.simplefilter("ignore", RuntimeWarning)
-            low, mean, high = np.nanmin(values, 0), np.nanmean(values, 0), np.nanmax(values, 0)
-        (line,) = ax.plot(t, mean, label=label)
-        if len(series) > 1:
-            ax.fill_between(t, low, high, color=line.get_color(), alpha=0.2)
+        for line, column in columns.items():
+            values = np.array([s.column(column)[:n] for s in series])
+            with warnings.catch_warnings():  # all-NaN samples (nothing mapped yet) stay NaN, silently
+                warnings.simplefilter("ignore", RuntimeWarning)
+                low, mean, high = np.nanmin(values, 0), np.nanmean(values, 0), np.nanmax(values, 0)
+            name = line if len(runs) == 1 and line else f"{label}: {line}" if line else label
+            (drawn,) = ax.plot(t, mean, label=name)
+            if len(series) > 1:
+                ax.fill_between(t, low, high, color=drawn.get_color(), alpha=0.2)
+    first = next(iter(columns.values()))
     ax.set_xlabel("simulated time (s)")
-    ax.set_ylabel(LABELS.get(metric, metric))
+    ax.set_ylabel(ylabel or LABELS.get(first, first))
     ax.grid(alpha=0.3)
-    if len(runs) > 1:
+    if len(runs) * len(columns) > 1:
         ax.legend(fontsize="small")
     return _save(fig, path)
 
