@@ -99,3 +99,16 @@ def test_the_surface_check_refuses_a_cloud_that_jumps_and_takes_a_lasting_shift_
     assert shifted == [False, False, True, True, True, True, True]  # 7: its memory holds only shifted clouds
     assert check.stats() == {"surface_checked": 11, "surface_refused": 3}
 
+
+
+def test_a_clouds_surface_is_its_highest_point_per_cell():
+    """Per plan cell the highest point, cells in key order; an empty cloud has no surface."""
+    from layerpilot.depth.surface_check import surface
+
+    points = np.array([[0.5, 0.5, 3.0], [0.2, 0.1, 5.0], [3.0, 3.0, 1.0], [0.9, 0.9, -2.0], [3.5, 3.9, 0.5]],
+                      np.float32)
+    keys, heights = surface(points, 1.0)
+    assert len(keys) == 2 and np.all(np.diff(keys) > 0)
+    assert sorted(heights.tolist()) == [1.0, 5.0]
+    keys, heights = surface(np.zeros((0, 3), np.float32), 1.0)
+    assert len(keys) == len(heights) == 0
