@@ -101,7 +101,7 @@ def zenoh_config(cfg: BusConfig, *, listen: list[str], connect: list[str]) -> ze
     z.insert_json5("scouting/multicast/enabled", json.dumps(cfg.multicast_scouting))
     z.insert_json5("listen/endpoints", json.dumps(listen))
     z.insert_json5("connect/endpoints", json.dumps(connect))
-    # Zenoh's shared memory (on by default since eclipse-zenoh 1.6) keeps about 19 MB in every process each
+    # Zenoh's shared memory (on by default since eclipse-zenoh 1.6) keeps 20 to 40 MB in every process each
     # time a peer dies (tools/zenoh_restart_leak.py, docs/bus.md); payloads here are plain bytes, which never
     # use it. A mission's bus.transport.shared_memory table can turn it back on.
     z.insert_json5("transport/shared_memory/enabled", "false")
