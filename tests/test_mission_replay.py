@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zenoh
 
 from layerpilot.bus import messages as msg
 from layerpilot.bus.keys import Keys
@@ -66,8 +67,9 @@ def test_running_decide_node_publishes_the_same_decision_bytes(recorded):
     sub = world.declare_subscriber(k.decision, lambda s: published.append(s.payload.to_bytes()))
     node.start()
     try:
-        layers = world.declare_publisher(k.layers)
-        poses = world.declare_publisher(k.pose)
+        block = zenoh.CongestionControl.BLOCK  # every step matters here: none may be dropped on a busy machine
+        layers = world.declare_publisher(k.layers, congestion_control=block)
+        poses = world.declare_publisher(k.pose, congestion_control=block)
         wait_for(lambda: layers.matching_status.matching and poses.matching_status.matching, "the node's subscriptions")
         expected = []
         for step in result.pilot_inputs:

@@ -51,11 +51,11 @@ height = 240
             assert up.poll() is None and time.monotonic() < end, "".join(lines[-20:])
             replies = list(operator.get(K.service("stats"), timeout=5.0))
             stats = pb.MapStats.FromString(replies[0].ok.payload.to_bytes()) if replies and replies[0].ok else None
-            refined = max((h.get("refined", 0) for h in health), default=0)
-            if stats is not None and stats.clouds_inserted >= 5 and refined >= 5 and len(decisions) >= 4:
+            last = health[-1] if health else {}  # the depth node's newest status (it may lag the map's count)
+            if (stats is not None and stats.clouds_inserted >= 5 and last.get("refined", 0) >= 5
+                    and last.get("clouds", 0) >= 5 and len(decisions) >= 4):
                 break
             time.sleep(1.0)
-        last = health[-1]
         assert last["refined"] >= 5 and last["clouds"] >= 5, last
         assert "time_offset_pairs" in last, last  # the camera clock's offset is being estimated
         assert last["height_registered"] >= 1, last  # clouds are fitted to the flight's earlier ones

@@ -132,9 +132,12 @@ def open_session(cfg: BusConfig | None = None) -> zenoh.Session:
     return zenoh.open(zenoh_config(cfg, listen=[f"{host}:0", *cfg.listen], connect=[cfg.endpoint, *cfg.connect]))
 
 
-def publish(session: zenoh.Session, key: str, payload: bytes) -> None:
-    """Put ``payload`` on ``key`` with the congestion control its topic needs (see LOSSLESS_TOPICS)."""
-    lossless = key.rsplit("/", 1)[-1] in LOSSLESS_TOPICS
+def publish(session: zenoh.Session, key: str, payload: bytes, lossless: bool | None = None) -> None:
+    """Put ``payload`` on ``key`` with the congestion control its topic needs (see LOSSLESS_TOPICS), or
+    blocking when ``lossless`` says so (a survey photo played as a camera frame: each one is a picture
+    the map needs, not the newest of a stream)."""
+    if lossless is None:
+        lossless = key.rsplit("/", 1)[-1] in LOSSLESS_TOPICS
     session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK if lossless else None)
 
 

@@ -198,7 +198,8 @@ class CameraNode:
             return True
         self.read += 1
         stamp = float(player.stamps[index])
-        publish(self.session, self.keys.pose, encode_state(State(stamp, self.keys.vehicle, player.body_pose(index))))
+        publish(self.session, self.keys.pose, encode_state(State(stamp, self.keys.vehicle, player.body_pose(index))),
+                lossless=True)
         frame = player.frame(index)
         with self._cond:  # the pose comes back through the bus, as any telemetry does
             self._cond.wait_for(lambda: self.track.newest >= stamp or self.stop_event.is_set(), POSE_ROUND_TRIP)
@@ -207,7 +208,8 @@ class CameraNode:
             return True
         self.published += 1
         publish(self.session, self.keys.camera, encode_frame(FrameMessage(
-            self.keys.vehicle, self.published, CameraFrame(frame.image, pose, frame.intrinsics, stamp))))
+            self.keys.vehicle, self.published, CameraFrame(frame.image, pose, frame.intrinsics, stamp))),
+            lossless=True)  # a busy depth node slows the folder's play instead of losing a photo
         return True
 
     def _await_listener(self) -> None:
