@@ -100,7 +100,6 @@ def test_the_surface_check_refuses_a_cloud_that_jumps_and_takes_a_lasting_shift_
     assert check.stats() == {"surface_checked": 11, "surface_refused": 3}
 
 
-
 def test_a_clouds_surface_is_its_highest_point_per_cell():
     """Per plan cell the highest point, cells in key order; an empty cloud has no surface."""
     from layerpilot.depth.surface_check import surface
