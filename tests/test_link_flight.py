@@ -169,7 +169,8 @@ def test_refusals_are_reported_with_the_mav_result_name(vehicle, link):
 
 
 def test_arm_retries_until_prearm_passes_and_readiness_names_what_is_missing():
-    endpoint = start_vehicle(prearm_delay_s=10.0)   # 2 s of wall time at 5x
+    endpoint = start_vehicle(prearm_delay_s=20.0)   # 4 s of wall time at 5x, the GPS fix at half: a slow connect
+    # on a busy machine must not let the fix arrive before the first readiness check
     try:
         with FlightLink(LinkConfig(url=url_of(endpoint), **FAST)) as lk:
             lk.connect(5.0)
@@ -178,7 +179,7 @@ def test_arm_retries_until_prearm_passes_and_readiness_names_what_is_missing():
             assert "position estimate (LOCAL_POSITION_NED)" in info.value.missing
             lk.set_mode("GUIDED")
             lk.control.in_control = True
-            lk.arm(timeout=6.0)                     # refused (PreArm) until the checks pass, then armed
+            lk.arm(timeout=12.0)                    # refused (PreArm) until the checks pass, then armed
             assert lk.armed
             assert "MAV_CMD_COMPONENT_ARM_DISARM rejected: MAV_RESULT_FAILED" in lk.events
     finally:
