@@ -24,6 +24,8 @@ from layerpilot.sim.pose_errors import PoseErrors
 from layerpilot.sim.sensors import PROFILES
 from layerpilot.camera import camera_pose
 
+from conftest import wait_for
+
 SIZE = (320, 240)
 
 
@@ -175,9 +177,8 @@ def test_the_depth_node_hears_the_pose_stream_and_reports_the_refinement(world):
     keys = Keys("uav1")
     poses, camera = client.declare_publisher(keys.pose), client.declare_publisher(keys.camera)
     try:
-        end = time.monotonic() + 30  # a put before the node's subscribers are matched is lost
-        while not (poses.matching_status.matching and camera.matching_status.matching) and time.monotonic() < end:
-            time.sleep(0.02)
+        wait_for(lambda: poses.matching_status.matching and camera.matching_status.matching,  # a put before it is lost
+                 "the node's subscriptions", timeout=30.0)
         seq = 0
         for kind, *event in _offset_flight(world, 0.12):
             if kind == "pose":
@@ -186,10 +187,8 @@ def test_the_depth_node_hears_the_pose_stream_and_reports_the_refinement(world):
             seq += 1
             time.sleep(0.05)  # the poses before the frame arrive first
             camera.put(encode_frame(FrameMessage("uav1", seq, event[0])))
-            end = time.monotonic() + 30
-            while node.status().get("frames", 0) < seq and time.monotonic() < end:
-                time.sleep(0.02)
-            assert node.status().get("frames", 0) == seq, f"frame {seq} not handled in 30 s: {node.status()}"
+            wait_for(lambda: node.status().get("frames", 0) >= seq, f"frame {seq} to be handled", timeout=30.0)
+            assert node.status()["frames"] == seq, node.status()
         status = node.status()
     finally:
         node.stop()

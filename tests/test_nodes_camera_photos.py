@@ -110,7 +110,7 @@ def test_photos_through_up_map_as_accurately_as_map_images(tmp_path) -> None:
     try:
         try:
             wait_for(lambda: any(re.search(r"depth/uav1 .* frames=12 ", line) for line in lines),
-                     "the depth node to take the 12 photos", timeout=600.0)
+                     "the depth node to take the 12 photos", timeout=300.0)
         except AssertionError as exc:  # say how far each node got
             last = {line.split()[0]: line for line in lines if line.strip()}
             raise AssertionError(f"{exc}; last lines: {list(last.values())[-6:]}") from None

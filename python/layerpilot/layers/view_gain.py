@@ -169,11 +169,11 @@ def visible_distance(top: np.ndarray, height: float, yaw: float, cell: float) ->
     return best
 
 
-Heading = float | np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray]  # per candidate (see view_gain)
+CandidateYaw = float | np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray]  # per candidate (see view_gain)
 
 
 def view_gain(observed: np.ndarray, last_seen: np.ndarray, top: np.ndarray, aoi: np.ndarray, now: float,
-              resolution: float, view: CameraView, yaw: Heading, stale_s: float = 300.0) -> np.ndarray:
+              resolution: float, view: CameraView, yaw: CandidateYaw, stale_s: float = 300.0) -> np.ndarray:
     """The layer: fraction of the candidate's footprint worth seeing, float32 in [0, 1].
 
     ``yaw``: the camera's heading at each candidate: one number, a (h, w) array, or a function of
