@@ -4,6 +4,7 @@ ground and trees the flight has already mapped; what cannot be fitted is counted
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 import numpy as np
 import pytest
@@ -97,7 +98,28 @@ def test_the_surface_check_refuses_a_cloud_that_jumps_and_takes_a_lasting_shift_
     assert check.accepts(far) and not np.isfinite(check.last_jump)
     shifted = [check.accepts(_lifted(c, 3.0)) for c in clouds[5:12]]
     assert shifted == [False, False, True, True, True, True, True]  # 7: its memory holds only shifted clouds
-    assert check.stats() == {"surface_checked": 11, "surface_refused": 3}
+    stats = check.stats()
+    assert (stats["surface_checked"], stats["surface_refused"], stats["surface_accepted_inconsistent"]) == (11, 3, 0)
+
+
+def test_the_surface_check_says_when_the_clouds_it_accepts_disagree_by_metres(clouds, caplog):
+    """Clouds that each pass (1.7 m from the one before, under the 2 m limit) yet disagree by a median
+    1.7 m make a map metres off: the check warns once and counts them; decimetres of disagreement do not."""
+    from layerpilot.depth.surface_check import SurfaceCheck, SurfaceCheckConfig
+
+    config = SurfaceCheckConfig(memory=1.0, consistency_clouds=6)  # the reference: the cloud a second before
+    steady, wandering = SurfaceCheck(config), SurfaceCheck(config)
+    with caplog.at_level(logging.WARNING, logger="layerpilot.depth"):
+        assert all(steady.accepts(_lifted(c, 0.3 * (k % 2))) for k, c in enumerate(clouds))
+        assert all(wandering.accepts(_lifted(c, 1.7 * (k % 2))) for k, c in enumerate(clouds))
+    assert steady.stats()["surface_jump_median_m"] == pytest.approx(0.3, abs=0.05)
+    assert steady.stats()["surface_accepted_inconsistent"] == 0
+    stats = wandering.stats()
+    assert stats["surface_refused"] == 0 and stats["surface_jump_median_m"] == pytest.approx(1.7, abs=0.05)
+    # from the first compared cloud on, every one is counted (its median over the last six is 1.7 m)
+    assert stats["surface_accepted_inconsistent"] == stats["surface_checked"] == len(clouds) - 1
+    warnings = [r for r in caplog.records if "disagree" in r.getMessage()]
+    assert len(warnings) == 1 and "1.7 m" in warnings[0].getMessage()
 
 
 def test_a_clouds_surface_is_its_highest_point_per_cell():
