@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import warnings
 from pathlib import Path
 
 # option dest -> the mission key it overrides (a flag that is not given leaves the file's value)
+MAX_DRONES = 8  # a lock-step fleet: one simulator, renderer and depth service per drone in one process
 EVAL_FLAGS = {"behavior": "decide.behavior", "seed": "decide.seed", "duration": "evaluation.duration",
               "world_seed": "sim.world.seed", "world_size": "sim.world.size", "pitch": "sim.camera.pitch_deg",
               "frame_rate": "sim.frame_rate_hz", "depth": "depth.source", "sensors": "sim.sensors", "out": "evaluation.out",
@@ -35,6 +37,27 @@ def _seeds(text: str) -> list[int]:
     if not seeds or len(set(seeds)) != len(seeds):
         raise argparse.ArgumentTypeError(f"expected distinct seeds, got {text!r}")
     return seeds
+
+
+def _fleet_sizes(text: str) -> list[int]:
+    try:
+        sizes = [int(v) for v in _names(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated drone counts, got {text!r}") from None
+    if not sizes or min(sizes) < 1 or max(sizes) > MAX_DRONES or len(set(sizes)) != len(sizes):
+        raise argparse.ArgumentTypeError(f"expected distinct drone counts in [1, {MAX_DRONES}], got {text!r}")
+    return sizes
+
+
+def fleet(mission, drones: int):
+    """The mission flown by ``drones`` vehicles: its own names first, then uav<k> for the rest."""
+    names = list(mission.vehicles[:drones])
+    k = 1
+    while len(names) < drones:
+        if f"uav{k}" not in names:
+            names.append(f"uav{k}")
+        k += 1
+    return dataclasses.replace(mission, vehicles=names)
 
 
 def _mission_options(p: argparse.ArgumentParser) -> None:
@@ -64,6 +87,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                            "(docs/view.md: bind addresses)")
     demo.add_argument("--web-port", type=int, default=9090, help="--view web: the viewer page's port (default 9090)")
     demo.add_argument("--no-rrd", action="store_true", help="do not save the run's Rerun recording (mission.rrd)")
+    demo.add_argument("--drones", type=int, help=f"vehicles in the fleet, 1-{MAX_DRONES} (default: the mission's "
+                      "vehicles); one map, each drone avoids the others' targets")
     _mission_options(demo)
     demo.set_defaults(func=_demo)
 
@@ -77,6 +102,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     study.add_argument("--name", default="study", help="run directory name")
     study.add_argument("--quick", action="store_true", help="short version for CI: 60 s, 1 seed, 160x120 camera")
     study.add_argument("--no-rrd", action="store_true", help="do not save each run's Rerun recording (mission.rrd)")
+    study.add_argument("--drones", type=_fleet_sizes, help="comma-separated fleet sizes: every behavior flies "
+                       "with each (rows 'BEHAVIOR xN'; default: the mission's vehicles)")
     _mission_options(study)
     study.set_defaults(func=_study)
 
@@ -95,16 +122,21 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
     from layerpilot.eval.report import format_value
     from layerpilot.eval.summary import label
 
-    names = [k for k in next(iter(rows.values())) if k != "t"]
+    names = [k for k in dict.fromkeys(k for r in rows.values() for k in r) if k != "t"]  # a fleet's rows add some
     width = max(len(label(n)) for n in names)
     lines = [" " * width + "  " + "  ".join(f"{name:>12}" for name in rows)]
     for n in names:
-        lines.append(f"{label(n):>{width}}  " + "  ".join(f"{format_value(r[n]):>12}" for r in rows.values()))
+        lines.append(f"{label(n):>{width}}  " + "  ".join(f"{format_value(r.get(n, math.nan)):>12}"
+                                                          for r in rows.values()))
     return "\n".join(lines)
 
 
 def _demo(args: argparse.Namespace) -> None:
     mission = _mission(args)
+    if args.drones is not None:
+        if not 1 <= args.drones <= MAX_DRONES:
+            raise ValueError(f"--drones must be in [1, {MAX_DRONES}], got {args.drones}")
+        mission = fleet(mission, args.drones)
     behavior = mission.decide.behavior
     result = _run(mission, Path(mission.evaluation.out) / (args.name or f"demo-{Path(behavior).stem}"),
                   rrd=not args.no_rrd, web_port=args.web_port if args.view == "web" else None,
@@ -164,18 +196,20 @@ def _study(args: argparse.Namespace) -> None:
     out = Path(ev.out) / args.name
     jobs: list[tuple[str, object, str]] = []
     worlds = args.world_seeds or [mission.sim.world.seed]
+    sizes = args.drones or [len(mission.vehicles)]
+    rows = {(b, n): b if sizes == [1] else f"{b} x{n}" for b in ev.behaviors for n in sizes}  # the table's rows
     for world in worlds:
         sim = dataclasses.replace(mission.sim, world=dataclasses.replace(mission.sim.world, seed=world))
-        for behavior in ev.behaviors:
+        for (behavior, drones), row in rows.items():
             # A pattern that only repeats has no decision noise: one run per world stands for every seed.
             for seed in range(1 if load_behavior(behavior).deterministic else ev.seeds):
                 decide = dataclasses.replace(mission.decide, behavior=behavior, seed=seed)
-                run = dataclasses.replace(mission, decide=decide, sim=sim)
-                name = f"{Path(behavior).stem}-s{seed}" if args.world_seeds is None else \
-                    f"{Path(behavior).stem}-w{world}-s{seed}"
-                jobs.append((behavior, run, str(out / "runs" / name)))
-    runs: dict[str, list[str]] = {b: [] for b in ev.behaviors}
-    finals: dict[str, list[dict[str, float]]] = {b: [] for b in ev.behaviors}
+                run = fleet(dataclasses.replace(mission, decide=decide, sim=sim), drones)
+                name = Path(row.replace(" x", "-x")).stem + ("" if args.world_seeds is None else f"-w{world}") + \
+                    f"-s{seed}"
+                jobs.append((row, run, str(out / "runs" / name)))
+    runs: dict[str, list[str]] = {row: [] for row in rows.values()}
+    finals: dict[str, list[dict[str, float]]] = {row: [] for row in rows.values()}
     progress = Progress(len(jobs), f"study ({len(jobs)} missions, {args.jobs} at a time)", " runs")
     progress.update(0)
     context = multiprocessing.get_context("spawn")  # fresh GL context and sockets per worker
@@ -190,7 +224,8 @@ def _study(args: argparse.Namespace) -> None:
     shared = {k: v for k, v in to_settings(mission).items() if k not in ("decide.behavior", "decide.seed")}
     if args.world_seeds is not None:
         shared["sim.world.seed"] = ", ".join(map(str, worlds))
-    flown = {b: dataclasses.replace(mission.decide, behavior=b).flown_behavior().summary() for b in ev.behaviors}
+    flown = {row: dataclasses.replace(mission.decide, behavior=b).flown_behavior().summary() for (b, _), row in
+             rows.items()}
     paths = write_study_report(out, runs, {**shared, "quick": args.quick}, flown)
     with warnings.catch_warnings():  # a metric that is NaN in every seed stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)

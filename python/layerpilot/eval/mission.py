@@ -41,6 +41,7 @@ import threading
 import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, TextIO, TypeVar
@@ -51,6 +52,7 @@ from layerpilot.bus import layerset as wire
 from layerpilot.decide import area_geometry, zone_mask
 from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.eval.alignment import MapScorer, MapSnapshot
+from layerpilot.eval.fleet import FleetTracker
 from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
@@ -71,6 +73,8 @@ from layerpilot.sim.simulator import Simulator
 
 _log = logging.getLogger("layerpilot.eval")
 T = TypeVar("T")
+START_SPACING = 15.0  # m along x between a fleet's drones at the mission clock's 0
+SENSOR_SEED_STRIDE = 1_000_003  # the i-th drone's sensor errors are seeded world seed + i * this
 
 
 @dataclass(frozen=True)
@@ -165,6 +169,15 @@ def flight_link(mission: Mission, url: str) -> FlightLink:
     return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission))
 
 
+def _merged(counts) -> dict[str, int]:
+    """Counts per kind summed over the drones, in the order the kinds first came."""
+    out: dict[str, int] = {}
+    for c in counts:
+        for kind, n in c.items():
+            out[kind] = out.get(kind, 0) + n
+    return out
+
+
 def _json_default(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
@@ -173,19 +186,43 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
+@dataclass
+class Drone:
+    """One vehicle of the lock-step fleet: its simulator and flight link, and what it flew."""
+
+    name: str
+    sim: Simulator
+    link: FlightLink
+    earth: LocalFrame  # where its map frame lies on the Earth
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the map frame's origin in its world
+    records: list[dict] = field(default_factory=list)  # its commands, as decisions.jsonl has them
+    path: list[tuple[float, float]] = field(default_factory=list)  # where it was at each frame
+    telemetry: list[tuple[float, Pose]] = field(default_factory=list)  # poses since the last frame, for depth
+    camera_poses: dict[str, list[tuple[float, Pose]]] = field(default_factory=lambda: {"truth": [], "raw": []})
+    columns: object = None  # the newest layer set, decoded
+    message: bytes | None = None  # ... and as it went over the wire
+    frames: int = 0
+
+
 class LockstepMission:
-    """The mission's first vehicle flown in lock-step through the pipeline, scored against the truth."""
+    """The mission's vehicles flown in lock-step through one pipeline and one map, scored against the truth.
+
+    Each vehicle has its own simulator (the same world; its sensors' errors seeded apart), flight link,
+    depth service and pilot; each pilot keeps r_e away from the others' current targets and gives way to
+    those listed before it, as the live decide nodes do. With one vehicle nothing of this shows."""
 
     def __init__(self, mission: Mission, progress_stream: TextIO | None = None, *, record_inputs: bool = False,
                  view=None, overlap: bool | None = None) -> None:
-        """``view``: a ``viz.lockstep.LockstepView`` shown the run as it flies (None: no view, no rerun).
-        ``overlap``: run the stages side by side (default: ``evaluation.overlap``)."""
-        self.mission, self.vehicle = mission, mission.vehicles[0]
+        """``view``: a ``viz.lockstep.LockstepView`` shown the first vehicle's run as it flies (None: no
+        view, no rerun). ``overlap``: run the stages side by side (default: ``evaluation.overlap``).
+        ``record_inputs``: keep the first vehicle's pilot inputs, for replay."""
+        self.mission, self.vehicles = mission, tuple(mission.vehicles)
+        self.vehicle = self.vehicles[0]
         self.view, self.record_inputs, self.progress_stream = view, record_inputs, progress_stream
         self.overlap = mission.evaluation.overlap if overlap is None else overlap
         # the run directory gets the map, not the mission's snapshot path
         mission = replace(mission, map_server=replace(mission.map_server, snapshot=""))
-        self.pipeline = MissionPipeline(mission.core, vehicles=[self.vehicle])
+        self.pipeline = MissionPipeline(mission.core, vehicles=self.vehicles)
         self.pilot = self.pipeline.pilots[self.vehicle]
         self.truth, self.gt = GroundTruthDepth(), VoxelMap(mission.map_server.resolution)  # what the map is scored on
         home = mission.decide.home
@@ -196,14 +233,10 @@ class LockstepMission:
         self.scorer = MapScorer(self.geometry, self.aoi, np.array([xmin, ymin, -1000.0]),
                                 np.array([xmax, ymax, 1000.0]))
         self.sampler = SeriesSampler(self.scorer.names, SAMPLE_INTERVAL)
+        self.fleet = FleetTracker(self.geometry, self.aoi, self.vehicles)
         self._scores: deque[tuple[float, Future]] = deque()  # samples taken, being scored
-        self.frames = 0
-        self.path: list[tuple[float, float]] = []
-        self.records: list[dict] = []
+        self.drones: list[Drone] = []
         self.inputs: list[PilotInput] = []
-        self.columns = self.message = None
-        self._telemetry: list[tuple[float, Pose]] = []  # poses since the last frame, for the depth lane
-        self.camera_poses: dict[str, list[tuple[float, Pose]]] = {"truth": [], "raw": []}  # per frame, scored
 
     @property
     def map(self) -> VoxelMap:
@@ -219,115 +252,159 @@ class LockstepMission:
         ev = self.mission.evaluation
         sim_cfg = replace(self.mission.simulator, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
         stages = Stages(("depth", "truth", "score"), self.overlap)
-        with Simulator(sim_cfg) as sim:
-            host, port = sim.endpoint.addresses[0]
-            link, frame = flight_link(self.mission, f"tcp:{host}:{port}"), sim.endpoint.ekf_frame
+        with ExitStack() as stack:
+            for i, name in enumerate(self.vehicles):
+                seed = None if i == 0 else sim_cfg.world.seed + SENSOR_SEED_STRIDE * i
+                sim = stack.enter_context(Simulator(replace(sim_cfg, sensor_seed=seed)))
+                host, port = sim.endpoint.addresses[0]
+                link = flight_link(self.mission, f"tcp:{host}:{port}")
+                stack.callback(link.close)
+                self.drones.append(Drone(name, sim, link, sim.endpoint.ekf_frame))
             try:
-                t, position = self._fly(sim, link, stages)
+                t = self._fly(stages)
             finally:
                 stages.close()
-                link.close()
-        return self._write(out, link, frame, t, position, time.monotonic() - wall0)
+        return self._write(out, t, time.monotonic() - wall0)
 
-    def _fly(self, sim: Simulator, link: FlightLink, stages: Stages) -> tuple[float, tuple[float, float, float]]:
-        mission, ev, pilot = self.mission, self.mission.evaluation, self.pilot
+    def _start(self, drone: Drone, index: int) -> None:
+        """Take off over MAVLink, then stand at the drone's hover point at rest, errors and battery fresh:
+        the mission clock's 0. A fleet's drones hover ``START_SPACING`` m apart along x."""
+        sim, link, pilot = drone.sim, drone.link, self.pipeline.pilots[drone.name]
         altitude = pilot.behavior.altitude
         _take_off(sim, link, altitude, pilot.cruise_speed or None)
-        origin = np.asarray(sim.endpoint.ekf_origin, float)  # the map frame's origin in the world
-        home = mission.decide.home
-        hover = np.array([home[0], home[1], altitude])
+        drone.origin = np.asarray(sim.endpoint.ekf_origin, float)
+        home = self.mission.decide.home
+        hover = np.array([home[0] + START_SPACING * index, home[1], altitude])
         sim.endpoint.restart_errors()  # the mission's sensor errors must not depend on how long the take-off took
         link.set_waypoint(*hover, yaw=0.0)
-        sim.endpoint.step(ev.step_s)
+        sim.endpoint.step(self.mission.evaluation.step_s)
         v = sim.vehicle
-        v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + origin, 0.0, 0.0, 0.0, 0.0
+        v.position[:], v.velocity[:], v.acceleration[:], v.yaw, v.yaw_rate = hover + drone.origin, 0.0, 0.0, 0.0, 0.0
         sim.endpoint.battery.swap()  # full at the mission clock's 0: the wall-paced take-off must not count
+
+    def _fly(self, stages: Stages) -> float:
+        mission, ev = self.mission, self.mission.evaluation
+        for i, drone in enumerate(self.drones):
+            self._start(drone, i)
         steps = 0  # the mission clock is steps * step_s: exact, whatever the take-off took
         progress = Progress(ev.duration, f"{mission.decide.behavior} mission", "s", self.progress_stream)
         frame_period, layer_period = 1.0 / mission.sim.frame_rate_hz, 1.0 / mission.map_server.layers_rate
         next_frame = next_layers = t = 0.0
+        fleet = len(self.drones) > 1
         while True:
-            reported = sim.endpoint.reported_pose()  # what the autopilot says, as the link node publishes it
-            position = reported.position - origin  # in the map frame
-            body = Pose.from_euler(reported.roll, reported.pitch, reported.yaw, position)
-            self.pipeline.pose(self.vehicle, t, body)
-            self._telemetry.append((t, body))
-            frame = None
-            if t >= next_frame - 1e-9:  # rendered first: it needs only the pose, while the last frame's stereo runs
+            shots: list[tuple[Drone, np.ndarray, CameraFrame | None, CameraFrame | None]] = []
+            frame_due = t >= next_frame - 1e-9
+            if frame_due:
                 next_frame += frame_period
-                capture = sim.capture(now=t)  # what the drone delivers; its truth is for scoring only
-                frame, reference = capture.frame.seen_from(origin), capture.truth.seen_from(origin)
+            for drone in self.drones:
+                reported = drone.sim.endpoint.reported_pose()  # what the autopilot says, as the link node publishes it
+                position = reported.position - drone.origin  # in the map frame
+                body = Pose.from_euler(reported.roll, reported.pitch, reported.yaw, position)
+                self.pipeline.pose(drone.name, t, body)
+                drone.telemetry.append((t, body))
+                frame = reference = None
+                if frame_due:  # rendered first: it needs only the pose, while the last frame's stereo runs
+                    capture = drone.sim.capture(now=t)  # what the drone delivers; its truth is for scoring only
+                    frame, reference = capture.frame.seen_from(drone.origin), capture.truth.seen_from(drone.origin)
+                shots.append((drone, position, frame, reference))
+            if fleet:
+                self.fleet.positions(t, {d.name: d.sim.vehicle.position - d.origin for d in self.drones})
             if t >= next_layers - 1e-9:  # the map's layer set, through the wire codec: every cloud so far is in
                 next_layers += layer_period
                 stages.settle("depth", "truth")
-                self._layers()
-            self._pilot_step(link, position, t, round(100 * sim.endpoint.battery.remaining) / 100)
-            if frame is not None:
-                self._frame(t, frame, reference, position, stages)
+                for drone in self.drones:
+                    self._layers(drone)
+            for drone, position, _, _ in shots:
+                self._pilot_step(drone, position, t, round(100 * drone.sim.endpoint.battery.remaining) / 100)
+            for drone, position, frame, reference in shots:
+                if frame is not None:
+                    self._frame(drone, t, frame, reference, position, stages)
             if self.sampler.due(t):  # the maps as they are now; the scoring runs beside the flight
                 stages.settle("depth", "truth")
                 self.sampler.taken(t)
                 self._scores.append((t, stages.submit("score", self._snapshot(t).scores)))
             self._record_scores()
             last = self.sampler.series.last() if len(self.sampler.series) else {}
-            progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {len(self.records)}")
-            if t >= ev.duration - 1e-9 or (pilot.ending and pilot.arrived(position)):
-                break  # the duration, or home after the pilot turned home (its flight is over)
-            sim.endpoint.step(ev.step_s)
+            waypoints = sum(len(d.records) for d in self.drones)
+            progress.update(t, f"mapped {last.get('percent_mapped', 0.0):5.1f}% waypoints {waypoints}")
+            if t >= ev.duration - 1e-9 or all(self.pipeline.pilots[d.name].ending
+                                              and self.pipeline.pilots[d.name].arrived(p) for d, p, _, _ in shots):
+                break  # the duration, or every drone home after its pilot turned home (its flight is over)
+            for drone in self.drones:
+                drone.sim.endpoint.step(ev.step_s)
             steps += 1
             t = steps * ev.step_s
         stages.settle()
         self._record_scores(wait=True)
         if self.sampler.series.last()["t"] < t:
             self.sampler.series.append(t, self._snapshot(t).scores())
-        progress.close(f"mapped {self.sampler.series.last()['percent_mapped']:.1f}% waypoints {len(self.records)}")
-        return t, tuple(float(c) for c in position)
+        waypoints = sum(len(d.records) for d in self.drones)
+        progress.close(f"mapped {self.sampler.series.last()['percent_mapped']:.1f}% waypoints {waypoints}")
+        return t
 
-    def _layers(self) -> None:
-        view = self.pipeline.layers(self.vehicle)
-        self.message = wire.encode_columns(view.columns, view.stamp, self.vehicle, self.mission.map_server.layers,
-                                           view.near)
-        self.columns = wire.to_column_layers(wire.decode_layer_set(self.message))
+    def _layers(self, drone: Drone) -> None:
+        view = self.pipeline.layers(drone.name)
+        drone.message = wire.encode_columns(view.columns, view.stamp, drone.name, self.mission.map_server.layers,
+                                            view.near)
+        drone.columns = wire.to_column_layers(wire.decode_layer_set(drone.message))
 
-    def _pilot_step(self, link: FlightLink, position: np.ndarray, t: float, charge: float) -> None:
+    def _others(self, drone: Drone) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The other drones' current targets (to avoid) and those of the drones before it (to yield to)."""
+        avoid, yield_to, before = [], [], True
+        for other in self.drones:
+            if other is drone:
+                before = False
+            elif (target := self.pipeline.pilots[other.name].target) is not None:
+                avoid.append(target[:2])
+                if before:
+                    yield_to.append(target[:2])
+        return avoid, yield_to
+
+    def _pilot_step(self, drone: Drone, position: np.ndarray, t: float, charge: float) -> None:
         """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence."""
-        evaluations = self.pilot.evaluations
-        command = self.pipeline.tick(self.vehicle, t, self.columns, battery=charge)
-        if self.record_inputs and self.pilot.evaluations != evaluations:
-            self.inputs.append(PilotInput(t, tuple(float(c) for c in position), self.message, command))
+        pilot, link = self.pipeline.pilots[drone.name], drone.link
+        evaluations = pilot.evaluations
+        avoid, yield_to = self._others(drone) if len(self.drones) > 1 else ((), ())
+        command = self.pipeline.tick(drone.name, t, drone.columns, battery=charge, avoid=avoid, yield_to=yield_to)
+        first = drone is self.drones[0]
+        if first and self.record_inputs and pilot.evaluations != evaluations:
+            self.inputs.append(PilotInput(t, tuple(float(c) for c in position), drone.message, command))
         if command is None:
             return
-        record = command.record()
+        record = command.record() if len(self.drones) == 1 else {"vehicle": drone.name, **command.record()}
         try:
             link.set_waypoint(*command.position, yaw=command.yaw)
         except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
             record["refused"] = str(exc)
             if link.refused[exc.kind] == 1:
-                _log.warning("waypoint refused by the link: %s", exc)
-        self.records.append(record)
-        if self.view is not None:  # with the tick's A0..A3 when the maker chose it
-            self.view.decision(t, record, None if command.decision is None else self.pilot.maker.last_tick)
+                _log.warning("waypoint refused by the link of %s: %s", drone.name, exc)
+        drone.records.append(record)
+        if self.view is not None and first:  # with the tick's A0..A3 when the maker chose it
+            self.view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
 
-    def _frame(self, t: float, frame: CameraFrame, reference: CameraFrame, position: np.ndarray,
+    def _frame(self, drone: Drone, t: float, frame: CameraFrame, reference: CameraFrame, position: np.ndarray,
                stages: Stages) -> None:
         """A camera frame: stereo and insertion on one lane, the ground-truth reference (the same exposure
         at the true pose, with the true depth) on the other."""
-        self.frames += 1
-        self.path.append((float(position[0]), float(position[1])))
-        self.camera_poses["truth"].append((frame.stamp, reference.pose))  # this exposure's truth, by the frame's stamp
-        self.camera_poses["raw"].append((frame.stamp, frame.pose))
-        if self.view is not None:
+        drone.frames += 1
+        drone.path.append((float(position[0]), float(position[1])))
+        drone.camera_poses["truth"].append((frame.stamp, reference.pose))  # this exposure's truth, by its stamp
+        drone.camera_poses["raw"].append((frame.stamp, frame.pose))
+        if self.view is not None and drone is self.drones[0]:
             if self.view.reads_map(t):
                 stages.settle("depth", "truth")
             self.view.frame(t, frame, position, self.map)
         max_range = self.mission.depth.max_depth
-        poses, self._telemetry = self._telemetry, []
+        poses, drone.telemetry = drone.telemetry, []
+        fleet = len(self.drones) > 1
 
         def depth() -> None:
             for stamp, pose in poses:
-                self.pipeline.telemetry(self.vehicle, stamp, pose)
-            if (cloud := self.pipeline.frame(self.vehicle, frame)) is not None:
-                self.pipeline.cloud(self.vehicle, cloud, max_range)
+                self.pipeline.telemetry(drone.name, stamp, pose)
+            if (cloud := self.pipeline.frame(drone.name, frame)) is not None:
+                self.pipeline.cloud(drone.name, cloud, max_range)
+                if fleet:
+                    self.fleet.saw(drone.name, cloud.points)
 
         def truth() -> None:
             if (cloud := self.truth.push(reference)) is not None and len(cloud):
@@ -336,48 +413,61 @@ class LockstepMission:
         stages.submit("depth", depth)
         stages.submit("truth", truth)
 
-    def _write(self, out: Path, link: FlightLink, frame: LocalFrame, t: float, position: tuple[float, float, float],
-               wall_s: float) -> MissionResult:
-        """``frame``: where the map frame lies on the Earth."""
-        est, pilot, mission = self.map, self.pilot, self.mission
+    def _write(self, out: Path, t: float, wall_s: float) -> MissionResult:
+        est, pilot, mission, lead = self.map, self.pilot, self.mission, self.drones[0]
+        link, frame = lead.link, lead.earth
+        position = self.pipeline.position(self.vehicle)
         est.save(out / "map.ot")
-        survey.save(pilot, out / "survey.json", t, t)  # the pilot's state: `decide --resume` can go on from here
+        for drone in self.drones:  # each pilot's state: `decide --resume` can go on from here
+            name = "survey.json" if drone is lead else f"survey-{drone.name}.json"
+            survey.save(self.pipeline.pilots[drone.name], out / name, t, t)
         est.export_bt(out / "map.bt")
         write_run_frame(out, frame)
+        records = [r for d in self.drones for r in d.records]
         with open(out / "decisions.jsonl", "w") as f:
-            for record in self.records:
+            for record in records:
                 f.write(json.dumps(record, default=_json_default) + "\n")
         final_columns = est.column_layers_for(self.geometry)
         final_layers = compute_layers(final_columns, pilot.layer_context(final_columns, position, t),
                                       pilot.behavior.layer_names, est)
         images = dict(final_layers.layers)
         images["elevation_m"] = final_layers.elevation_m
-        depth = self.pipeline.depth[self.vehicle]
-        records = self.records
+        pilots = [self.pipeline.pilots[d.name] for d in self.drones]
+        depths = [self.pipeline.depth[d.name] for d in self.drones]
         used = {"map_server.snapshot": str(out / "map.ot"), "decide.state": str(out / "survey.json"),
                 "sim.urls": (link.config.url,), "sim.step_s": mission.evaluation.step_s,
                 **{f"link.link.{k}": v for k, v in asdict(link.config).items()}}
-        settings = {**to_settings(mission), **used, "waypoints": len(records), "reached": pilot.reached,
-                    "ended": f"{pilot.ending}: {pilot.energy.why}; home at t = {t:.1f} s" if pilot.ending
-                    else "duration",
+        ended = [f"{p.ending}: {p.energy.why}" for p in pilots if p.ending]
+        settings = {**to_settings(mission), **used, "waypoints": len(records), "reached": sum(p.reached for p in pilots),
+                    "ended": f"{'; '.join(ended)}; home at t = {t:.1f} s" if ended else "duration",
                     "retargets": sum(r["reason"] == "retarget" for r in records),
-                    "replans": pilot.replans,  # a pattern's next flights over the gaps (pattern.then = "replan")
-                    "geofence": link.geofence.describe(), "waypoints_refused": dict(link.refused),
-                    "frames": self.frames, "clouds": depth.clouds,
-                    **{f"depth_{k}": v for k, v in depth.stats().items()}}  # why frames gave no cloud
+                    "replans": sum(p.replans for p in pilots),  # a pattern's next flights over its gaps
+                    "geofence": link.geofence.describe(),
+                    "waypoints_refused": _merged(d.link.refused for d in self.drones),
+                    "frames": sum(d.frames for d in self.drones), "clouds": sum(s.clouds for s in depths),
+                    **{f"depth_{k}": v for k, v in depths[0].stats().items()}}  # why frames gave no cloud
+        if len(self.drones) > 1:
+            settings.update({f"depth_{d.name}_{k}": v for d, s in zip(self.drones[1:], depths[1:])
+                             for k, v in s.stats().items()})
         run = {"mission_s": round(t, 2), "wall_s": round(wall_s, 2),
                "real_time_factor": round(t / max(wall_s, 1e-9), 2)}
-        extra = self._pose_errors(depth.trajectory())
+        extra = self._pose_errors(lead, depths[0].trajectory())
+        if len(self.drones) > 1:
+            extra.update(self.fleet.metrics())
+        path = (np.array(lead.path).reshape(-1, 2) if len(self.drones) == 1
+                else {d.name: np.array(d.path).reshape(-1, 2) for d in self.drones})
         paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", self.sampler.series,
-                                 final_columns, self.aoi, np.array(self.path).reshape(-1, 2), images, settings, extra,
-                                 run)
-        return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records), self.frames, depth.clouds,
-                             wall_s, paths, self.inputs)
+                                 final_columns, self.aoi, path, images, settings, extra, run)
+        return MissionResult(out, {**self.sampler.series.last(), **extra}, len(records),
+                             sum(d.frames for d in self.drones), sum(s.clouds for s in depths), wall_s, paths,
+                             self.inputs)
 
     def _snapshot(self, t: float) -> MapSnapshot:
-        """The maps to score, aligned by the common offset of the camera poses the clouds were placed with."""
-        placed = self.pipeline.depth[self.vehicle].trajectory()
-        return self.scorer.snapshot(self.map, self.gt, t, (self.camera_poses["truth"], placed))
+        """The maps to score, aligned by the common offset of the camera poses the first vehicle's clouds
+        were placed with (a fleet's drones wander apart; the map is scored on its first drone's offset)."""
+        lead = self.drones[0]
+        placed = self.pipeline.depth[lead.name].trajectory()
+        return self.scorer.snapshot(self.map, self.gt, t, (lead.camera_poses["truth"], placed))
 
     def _record_scores(self, wait: bool = False) -> None:
         """Append the finished samples to the series, in order (all of them with ``wait``)."""
@@ -387,12 +477,12 @@ class LockstepMission:
             if self.view is not None:
                 self.view.metrics(t, self.sampler.series.last())
 
-    def _pose_errors(self, refined: list[tuple[float, Pose]]) -> dict[str, float]:
+    def _pose_errors(self, drone: Drone, refined: list[tuple[float, Pose]]) -> dict[str, float]:
         """The camera poses as reported (``pose_raw_*``) and as the clouds were placed (``pose_refined_*``)
         against the truth, after the map's offset: median and p90 of position and attitude error."""
-        truth, offset = self.camera_poses["truth"], self.scorer.offset
+        truth, offset = drone.camera_poses["truth"], self.scorer.offset
         out: dict[str, float] = {}
-        for name, estimate in (("raw", self.camera_poses["raw"]), ("refined", refined)):
+        for name, estimate in (("raw", drone.camera_poses["raw"]), ("refined", refined)):
             if truth and estimate:
                 out.update(pose_errors(truth, estimate, offset).as_dict(f"pose_{name}"))
         return out
@@ -400,6 +490,6 @@ class LockstepMission:
 
 def run_mission(mission: Mission, run_dir: str | Path, progress_stream: TextIO | None = None, *,
                 record_inputs: bool = False, view=None, overlap: bool | None = None) -> MissionResult:
-    """Fly the mission's first vehicle in lock-step and write the run directory (see ``LockstepMission``)."""
+    """Fly the mission's vehicles in lock-step and write the run directory (see ``LockstepMission``)."""
     return LockstepMission(mission, progress_stream, record_inputs=record_inputs, view=view,
                            overlap=overlap).run(run_dir)

@@ -36,6 +36,8 @@ POSE_COLUMNS = {f"pose_{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k
                 (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
                  ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"),
                  ("poses", "poses compared"))}
+FLEET_COLUMNS = {"fleet_min_separation_m": "minimum separation (m)",
+                 "fleet_duplicate_coverage": "area seen by 2+ drones (share of seen)"}
 # What a run took, beside what it scored: mission seconds per wall-clock second.
 RUN_ROWS = {"mission_s": "mission time simulated (s)", "wall_s": "wall-clock time (s)",
             "real_time_factor": "real-time factor (mission s per wall s)"}
@@ -46,7 +48,9 @@ def label(name: str) -> str:
     if name.endswith(ABSOLUTE):
         base = name[: -len(ABSOLUTE)]
         return f"{LABELS.get(base, base)}, absolute"
-    return LABELS.get(name) or POSE_COLUMNS.get(name) or OFFSET_COLUMNS.get(name, name)
+    if name.startswith("seen_"):
+        return f"area seen by {name[len('seen_'):]} (%)"
+    return LABELS.get(name) or POSE_COLUMNS.get(name) or FLEET_COLUMNS.get(name) or OFFSET_COLUMNS.get(name, name)
 
 
 def metric_plots(names: Sequence[str]) -> list[tuple[str, dict[str, str], str]]:
@@ -81,7 +85,7 @@ def write_run_report(
     series: MetricSeries,
     layers: ColumnLayers,
     aoi: np.ndarray,
-    path_xy: np.ndarray,
+    path_xy: np.ndarray | Mapping[str, np.ndarray],
     layer_images: Mapping[str, np.ndarray],
     settings: Mapping[str, Any],
     final_extra: Mapping[str, float] | None = None,
@@ -200,7 +204,8 @@ def write_study_report(
     report.heading("Standard 3D metrics at d_v = 4 m")
     report.table(["behavior", "precision", "recall (completeness)", "F-score"], study_table(finals, STANDARD_3D))
     for heading, columns in (("Scoring up to the map's offset (mean ± std)", OFFSET_COLUMNS),
-                             ("Pose error over the mission (mean ± std)", POSE_COLUMNS)):
+                             ("Pose error over the mission (mean ± std)", POSE_COLUMNS),
+                             ("Fleets (mean ± std)", FLEET_COLUMNS)):
         if shown := present(finals, columns):
             report.heading(heading)
             report.table(["behavior", *shown.values()], study_table(finals, list(shown)))

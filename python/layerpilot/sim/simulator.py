@@ -51,6 +51,7 @@ class SimConfig:
     battery: BatteryConfig = field(default_factory=BatteryConfig)
     sensors: str = "perfect"
     sensor_overrides: dict[str, float] = field(default_factory=dict)
+    sensor_seed: int | None = None  # the sensors' errors' seed (None: the world's); a fleet's drones differ
 
     def __post_init__(self) -> None:
         sensor_profile(self.sensors, self.sensor_overrides, "sim.")  # an unknown name or key is an error here
@@ -98,7 +99,7 @@ class Simulator:
         ground = float(self.world.terrain_height(0.0, 0.0))
         self.vehicle = Multicopter(position=(0.0, 0.0, ground), ground_z=ground)
         self.sensors = self.config.sensor_profile
-        seed = self.config.world.seed
+        seed = self.config.world.seed if self.config.sensor_seed is None else self.config.sensor_seed
         self.endpoint = MavlinkVehicle(self.vehicle, self.config.urls,
                                        EndpointConfig(flavour=self.config.flavour, battery=self.config.battery,
                                                       sensors=self.sensors, seed=seed))

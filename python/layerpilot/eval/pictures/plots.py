@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 from layerpilot.eval.series import MetricSeries  # noqa: E402
 from layerpilot.map.columns import ColumnLayers  # noqa: E402
 
+PATH_COLORS = ["red", "cyan", "magenta", "orange", "lime"]  # a fleet's drones, in mission order
 LABELS = {
     "percent_mapped": "area mapped (%)",
     "avg_time_since_observed": "average time since observed (s)",
@@ -73,15 +74,18 @@ def plot_metric(runs: Mapping[str, Sequence[MetricSeries]], metric: str | Mappin
 
 def plot_flight_path(
     layers: ColumnLayers,
-    path_xy: np.ndarray,
+    path_xy: np.ndarray | Mapping[str, np.ndarray],
     aoi: np.ndarray,
     out: str | os.PathLike,
     title: str = "",
 ) -> Path:
-    """The flight path (x, y per row) drawn over the color layer, with the area of interest outlined."""
-    path_xy = np.asarray(path_xy, dtype=np.float64)
-    if path_xy.ndim != 2 or path_xy.shape[1] != 2:
-        raise ValueError(f"path_xy: expected shape (N, 2), got {path_xy.shape}")
+    """The flight path (x, y per row) drawn over the color layer, with the area of interest outlined;
+    a fleet's paths (vehicle -> path) one colour each, named in the legend."""
+    paths = {name: np.asarray(p, dtype=np.float64) for name, p in
+             (path_xy.items() if isinstance(path_xy, Mapping) else [("", path_xy)])}
+    for name, p in paths.items():
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"path_xy{f'[{name!r}]' if name else ''}: expected shape (N, 2), got {p.shape}")
     if aoi.shape != layers.geometry.shape:
         raise ValueError(f"aoi: expected shape {layers.geometry.shape}, got {aoi.shape}")
     g = layers.geometry
@@ -91,10 +95,15 @@ def plot_flight_path(
     ax.imshow(image, origin="lower", extent=g.extent, interpolation="nearest")
     xs, ys = g.cell_centers()
     ax.contour(xs, ys, aoi.astype(float), levels=[0.5], colors="yellow", linewidths=1.2)
-    if len(path_xy):
-        ax.plot(path_xy[:, 0], path_xy[:, 1], color="red", linewidth=1.0)
-        ax.plot(*path_xy[0], "o", color="white", markeredgecolor="black", label="start")
-        ax.plot(*path_xy[-1], "s", color="red", markeredgecolor="black", label="end")
+    drawn = False
+    for (name, p), color in zip(paths.items(), PATH_COLORS * len(paths)):
+        if not len(p):
+            continue
+        ax.plot(p[:, 0], p[:, 1], color=color, linewidth=1.0, label=name or None)
+        ax.plot(*p[0], "o", color="white", markeredgecolor="black", label=None if drawn else "start")
+        ax.plot(*p[-1], "s", color=color, markeredgecolor="black", label=None if drawn else "end")
+        drawn = True
+    if drawn:
         ax.legend(fontsize="small", loc="upper right")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
