@@ -48,9 +48,15 @@ def test_two_drones_share_one_map_keep_their_targets_apart_and_map_more_than_one
             assert gap >= r_e - 1e-6, (r, other, gap)
         current[r["vehicle"]] = r["waypoint"]
 
+    # altitude layers: the second drone flies 10 m above the first, so crossing paths pass apart
+    layer = two_drones.decide.altitude_layer
+    assert {r["waypoint"][2] for r in by_vehicle["uav1"]} == {50.0}
+    assert {r["waypoint"][2] for r in by_vehicle["uav2"]} == {50.0 + layer}
     # the fleet's numbers: closest approach over the flight, work done twice, each drone's share
     f = pair.final
     assert 0.0 < f["fleet_min_separation_m"] <= START_SPACING + 1e-6
+    separated = f["fleet_min_separation_m"] >= two_drones.link.separation
+    assert separated or f["fleet_min_height_gap_near_m"] >= 0.8 * layer, f
     assert 0.0 < f["fleet_duplicate_coverage"] < 1.0
     assert f["seen_uav1"] > 10.0 and f["seen_uav2"] > 10.0
     assert "fleet_min_separation_m" not in alone.final  # one drone: no fleet rows
@@ -66,10 +72,13 @@ def test_fleet_tracker_counts_the_closest_approach_and_the_columns_seen_twice() 
     g = GridGeometry(0.0, 0.0, 1.0, 4, 2)
     aoi = np.ones(g.shape, bool)
     aoi[1, 3] = False
-    tracker = FleetTracker(g, aoi, ["a", "b", "c"])
+    tracker = FleetTracker(g, aoi, ["a", "b", "c"], separation=12.0)
     tracker.positions(0.0, {"a": (0.0, 0.0, 50.0), "b": (30.0, 40.0, 50.0), "c": (100.0, 0.0, 10.0)})
+    assert math.isnan(tracker.metrics()["fleet_min_height_gap_near_m"])  # never nearer than 12 m
     tracker.positions(1.0, {"a": (0.0, 0.0, 50.0), "b": (6.0, 8.0, 90.0), "c": (100.0, 0.0, 10.0)})
+    tracker.positions(2.0, {"a": (0.0, 0.0, 50.0), "b": (9.0, 8.0, 61.0), "c": (100.0, 0.0, 10.0)})
     assert tracker.min_separation == 10.0 and tracker.closest == (1.0, "a", "b")  # horizontal only
+    assert tracker.metrics()["fleet_min_height_gap_near_m"] == 40.0  # at t = 1; at t = 2 12.04 m apart: not near
     tracker.saw("a", np.array([[0.5, 0.5, 3.0], [1.5, 0.5, 3.0], [3.5, 1.5, 0.0], [-1.0, 0.5, 0.0]]))
     tracker.saw("b", np.array([[1.2, 0.1, 9.0], [2.5, 1.5, 0.0]]))
     m = tracker.metrics()

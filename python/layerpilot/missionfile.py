@@ -44,6 +44,8 @@ class LinkSettings:
     end_action: str = "rtl"  # what the link node commands when the mission ends: rtl, land or loiter
     end_timeout: float = 10.0  # s the link node waits for the end action's COMMAND_ACK and mode change
     on_reboot: str = "end"  # the autopilot rebooted: "end" the flying, or "pause" until a pilot hands GUIDED back
+    separation: float = 10.0  # m: a fleet's waypoint nearer another drone (its position or target) is refused; 0 off
+    separation_stale_s: float = 5.0  # s without news of a drone: it no longer counts
 
     def __post_init__(self) -> None:
         check_range("link.takeoff_altitude", self.takeoff_altitude, 1.0, 500.0)
@@ -54,6 +56,8 @@ class LinkSettings:
         check_range("link.end_timeout", self.end_timeout, 1.0, 12.0)  # inside `up`'s 15 s stop grace
         if self.on_reboot not in ("end", "pause"):
             raise ConfigError(f"link.on_reboot: expected 'end' or 'pause', got {self.on_reboot!r}")
+        check_range("link.separation", self.separation, 0.0, 10_000.0)
+        check_range("link.separation_stale_s", self.separation_stale_s, 0.1, 3600.0)
 
 
 @dataclass(frozen=True)

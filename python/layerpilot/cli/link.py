@@ -64,12 +64,12 @@ def _node(args, mission, vehicle, session) -> Running:
     from layerpilot.nodes.link import LinkNode
 
     node = LinkNode(session, vehicle, link_settings(args, mission, vehicle), geofence_for(mission),
-                    clock_from_args(args))
+                    clock_from_args(args), fleet=mission.vehicles)
     link = node.link
 
     def status() -> dict:
         out = {"phase": node.phase, "waypoints": node.waypoints, "rejected": node.rejects.total,
-               "refused": dict(link.refused),  # by the geofence, per kind
+               "refused": dict(link.refused),  # by the geofence and the fleet's separation, per kind
                "pose": node.pose_state(), "poses": node.poses,
                "telemetry": link.telemetry().line() if link.flavour else "no autopilot heard yet"}
         if node.phase == "waiting for the autopilot":

@@ -1,8 +1,10 @@
 """What a fleet's drones did together: how close they came and how much of the area they saw twice.
 
 A drone "saw" a column of the area when a point of one of its clouds fell in it. Duplicate coverage is
-the share of the area's seen columns that two or more drones saw: work done twice. Separation is the
-smallest horizontal distance between two drones' true positions over the scored flight.
+the share of the area's seen columns that two or more drones saw: work done twice. Separation: the
+smallest horizontal distance between two drones' true positions over the scored flight, and the
+smallest height difference at any moment two drones were horizontally nearer than ``separation`` (their
+altitude layers keep them apart there).
 """
 
 from __future__ import annotations
@@ -19,20 +21,24 @@ from layerpilot.grid import GridGeometry
 class FleetTracker:
     """Per-drone coverage masks over a mission's grid and the closest approach between any two drones."""
 
-    def __init__(self, geometry: GridGeometry, aoi: np.ndarray, vehicles: Sequence[str]) -> None:
+    def __init__(self, geometry: GridGeometry, aoi: np.ndarray, vehicles: Sequence[str],
+                 separation: float = 10.0) -> None:
         if aoi.shape != geometry.shape:
             raise ValueError(f"aoi: shape {aoi.shape} is not the grid's {geometry.shape}")
-        self.geometry, self.aoi, self.vehicles = geometry, aoi, tuple(vehicles)
+        self.geometry, self.aoi, self.vehicles, self.separation = geometry, aoi, tuple(vehicles), separation
         self._seen = {v: np.zeros(geometry.shape, bool) for v in self.vehicles}
         self.min_separation = math.inf
         self.closest: tuple[float, str, str] | None = None  # (time, vehicle, vehicle) of the closest approach
+        self.min_gap_near = math.inf  # m of height between two drones horizontally nearer than ``separation``
 
     def positions(self, t: float, where: Mapping[str, Sequence[float]]) -> None:
-        """The drones' true positions at mission time ``t`` (map frame)."""
+        """The drones' true positions (x, y, z) at mission time ``t`` (map frame)."""
         for a, b in itertools.combinations(self.vehicles, 2):
             d = math.hypot(where[a][0] - where[b][0], where[a][1] - where[b][1])
             if d < self.min_separation:
                 self.min_separation, self.closest = d, (t, a, b)
+            if d < self.separation:
+                self.min_gap_near = min(self.min_gap_near, abs(where[a][2] - where[b][2]))
 
     def saw(self, vehicle: str, points: np.ndarray) -> None:
         """The columns a cloud of ``vehicle``'s (N x 3, map frame) fell in."""
@@ -43,13 +49,15 @@ class FleetTracker:
         self._seen[vehicle][rows[inside], cols[inside]] = True
 
     def metrics(self) -> dict[str, float]:
-        """``fleet_min_separation_m`` (NaN for one drone), ``fleet_duplicate_coverage`` (0..1) and each
-        drone's share of the area seen (``seen_<vehicle>``, %)."""
+        """``fleet_min_separation_m`` (NaN for one drone), ``fleet_min_height_gap_near_m``,
+        ``fleet_duplicate_coverage`` (0..1) and each drone's share of the area seen (``seen_<vehicle>``, %)."""
         count = sum(m.astype(np.int32) for m in self._seen.values())
         seen = np.count_nonzero((count >= 1) & self.aoi)
         twice = np.count_nonzero((count >= 2) & self.aoi)
         area = max(np.count_nonzero(self.aoi), 1)
         out = {"fleet_min_separation_m": float(self.min_separation) if self.closest else math.nan,
+               "fleet_min_height_gap_near_m": float(self.min_gap_near) if math.isfinite(self.min_gap_near)
+               else math.nan,  # NaN: never horizontally nearer than the separation
                "fleet_duplicate_coverage": float(twice / seen) if seen else 0.0}
         out.update({f"seen_{v}": float(100.0 * np.count_nonzero(m & self.aoi) / area) for v, m in self._seen.items()})
         return out

@@ -62,6 +62,7 @@ from layerpilot.geometry import CameraFrame, Pose
 from layerpilot.layers import compute_layers
 from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, WaypointRefused
+from layerpilot.link.separation import Separation
 from layerpilot.map import VoxelMap
 from layerpilot.mission import resume as survey
 from layerpilot.missionfile import geofence_for
@@ -163,10 +164,12 @@ def _take_off(sim: Simulator, link: FlightLink, altitude: float, cruise_speed: f
         raise RuntimeError(f"take-off over MAVLink failed: {error[0]}") from error[0]
 
 
-def flight_link(mission: Mission, url: str) -> FlightLink:
-    """The evaluator's flight link to the simulated vehicle, with the mission's geofence, as the live link
-    node has it. Heartbeats come at 1 Hz of mission time; a slow lock-step frame must not look like a lost link."""
-    return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission))
+def flight_link(mission: Mission, url: str, separation: Separation | None = None) -> FlightLink:
+    """The evaluator's flight link to the simulated vehicle, with the mission's geofence (and a fleet's
+    separation), as the live link node has it. Heartbeats come at 1 Hz of mission time; a slow lock-step
+    frame must not look like a lost link."""
+    return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission),
+                      separation=separation)
 
 
 def _merged(counts) -> dict[str, int]:
@@ -199,9 +202,11 @@ class Drone:
     path: list[tuple[float, float]] = field(default_factory=list)  # where it was at each frame
     telemetry: list[tuple[float, Pose]] = field(default_factory=list)  # poses since the last frame, for depth
     camera_poses: dict[str, list[tuple[float, Pose]]] = field(default_factory=lambda: {"truth": [], "raw": []})
+    separation: Separation | None = None  # a fleet's: what this drone's link hears of the others
     columns: object = None  # the newest layer set, decoded
     message: bytes | None = None  # ... and as it went over the wire
     frames: int = 0
+    refused: Command | None = None  # a command refused for separation, sent again each step until it passes
 
 
 class LockstepMission:
@@ -233,10 +238,11 @@ class LockstepMission:
         self.scorer = MapScorer(self.geometry, self.aoi, np.array([xmin, ymin, -1000.0]),
                                 np.array([xmax, ymax, 1000.0]))
         self.sampler = SeriesSampler(self.scorer.names, SAMPLE_INTERVAL)
-        self.fleet = FleetTracker(self.geometry, self.aoi, self.vehicles)
+        self.fleet = FleetTracker(self.geometry, self.aoi, self.vehicles, mission.link.separation)
         self._scores: deque[tuple[float, Future]] = deque()  # samples taken, being scored
         self.drones: list[Drone] = []
         self.inputs: list[PilotInput] = []
+        self._now = 0.0  # the mission clock, for the fleet's separation
 
     @property
     def map(self) -> VoxelMap:
@@ -253,13 +259,16 @@ class LockstepMission:
         sim_cfg = replace(self.mission.simulator, step_s=ev.step_s, urls=("tcp:127.0.0.1:0",))
         stages = Stages(("depth", "truth", "score"), self.overlap)
         with ExitStack() as stack:
+            apart = len(self.vehicles) > 1 and self.mission.link.separation > 0
             for i, name in enumerate(self.vehicles):
                 seed = None if i == 0 else sim_cfg.world.seed + SENSOR_SEED_STRIDE * i
                 sim = stack.enter_context(Simulator(replace(sim_cfg, sensor_seed=seed)))
                 host, port = sim.endpoint.addresses[0]
-                link = flight_link(self.mission, f"tcp:{host}:{port}")
+                separation = Separation(self.mission.link.separation, self.mission.link.separation_stale_s,
+                                        clock=lambda: self._now) if apart else None
+                link = flight_link(self.mission, f"tcp:{host}:{port}", separation)
                 stack.callback(link.close)
-                self.drones.append(Drone(name, sim, link, sim.endpoint.ekf_frame))
+                self.drones.append(Drone(name, sim, link, sim.endpoint.ekf_frame, separation=separation))
             try:
                 t = self._fly(stages)
             finally:
@@ -308,7 +317,9 @@ class LockstepMission:
                     frame, reference = capture.frame.seen_from(drone.origin), capture.truth.seen_from(drone.origin)
                 shots.append((drone, position, frame, reference))
             if fleet:
+                self._now = t
                 self.fleet.positions(t, {d.name: d.sim.vehicle.position - d.origin for d in self.drones})
+                self._hear_each_other(shots)
             if t >= next_layers - 1e-9:  # the map's layer set, through the wire codec: every cloud so far is in
                 next_layers += layer_period
                 stages.settle("depth", "truth")
@@ -360,8 +371,16 @@ class LockstepMission:
                     yield_to.append(target[:2])
         return avoid, yield_to
 
+    def _hear_each_other(self, shots) -> None:
+        """Each drone's link hears where the others are (as reported) and where they go (their targets)."""
+        for drone in self.drones:
+            for other, position, _, _ in shots:
+                if other is not drone:
+                    drone.separation.heard(other.name, position, self.pipeline.pilots[other.name].target)
+
     def _pilot_step(self, drone: Drone, position: np.ndarray, t: float, charge: float) -> None:
-        """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence."""
+        """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence (and a
+        fleet's separation: a refused command is sent again each step, as the decide node repeats it)."""
         pilot, link = self.pipeline.pilots[drone.name], drone.link
         evaluations = pilot.evaluations
         avoid, yield_to = self._others(drone) if len(self.drones) > 1 else ((), ())
@@ -370,17 +389,29 @@ class LockstepMission:
         if first and self.record_inputs and pilot.evaluations != evaluations:
             self.inputs.append(PilotInput(t, tuple(float(c) for c in position), drone.message, command))
         if command is None:
+            if drone.refused is not None:
+                self._send(drone, drone.refused)
             return
         record = command.record() if len(self.drones) == 1 else {"vehicle": drone.name, **command.record()}
-        try:
-            link.set_waypoint(*command.position, yaw=command.yaw)
-        except WaypointRefused as exc:  # as in the link node: refused, counted, the vehicle keeps on
-            record["refused"] = str(exc)
-            if link.refused[exc.kind] == 1:
-                _log.warning("waypoint refused by the link of %s: %s", drone.name, exc)
+        if (refusal := self._send(drone, command)) is not None:
+            record["refused"] = refusal
         drone.records.append(record)
         if self.view is not None and first:  # with the tick's A0..A3 when the maker chose it
             self.view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
+
+    def _send(self, drone: Drone, command: Command) -> str | None:
+        """The command to the vehicle over MAVLink; why the link refused it, or None. As in the link node, a
+        refused waypoint is counted and the vehicle keeps on; one refused for separation waits its turn."""
+        link = drone.link
+        try:
+            link.set_waypoint(*command.position, yaw=command.yaw, separate=command.reason != "battery")
+        except WaypointRefused as exc:
+            if link.refused[exc.kind] == 1:
+                _log.warning("waypoint refused by the link of %s: %s", drone.name, exc)
+            drone.refused = command if exc.kind == "separation" else None
+            return str(exc)
+        drone.refused = None
+        return None
 
     def _frame(self, drone: Drone, t: float, frame: CameraFrame, reference: CameraFrame, position: np.ndarray,
                stages: Stages) -> None:

@@ -36,7 +36,8 @@ POSE_COLUMNS = {f"pose_{p}_{k}": f"{p} {text}" for p in ("raw", "refined") for k
                 (("position_median", "position median (m)"), ("position_p90", "position p90 (m)"),
                  ("attitude_median_deg", "attitude median (deg)"), ("attitude_p90_deg", "attitude p90 (deg)"),
                  ("poses", "poses compared"))}
-FLEET_COLUMNS = {"fleet_min_separation_m": "minimum separation (m)",
+FLEET_COLUMNS = {"fleet_min_separation_m": "closest horizontal approach (m)",
+                 "fleet_min_height_gap_near_m": "least height gap while nearer than the separation (m)",
                  "fleet_duplicate_coverage": "area seen by 2+ drones (share of seen)"}
 # What a run took, beside what it scored: mission seconds per wall-clock second.
 RUN_ROWS = {"mission_s": "mission time simulated (s)", "wall_s": "wall-clock time (s)",

@@ -40,8 +40,9 @@ class ControlLost(LinkError):
 
 
 class WaypointRefused(LinkError, ValueError):
-    """A waypoint outside the geofence (area or altitude) or not finite; nothing was sent.
-    ``kind``: ``not finite``, ``outside the area`` or ``altitude``."""
+    """A waypoint outside the geofence (area or altitude), not finite, or too near another drone
+    (``link.separation``); nothing was sent. ``kind``: ``not finite``, ``outside the area``, ``altitude``
+    or ``separation``."""
 
     def __init__(self, message: str, kind: str) -> None:
         super().__init__(message)

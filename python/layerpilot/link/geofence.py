@@ -16,7 +16,7 @@ from typing import Literal
 
 from layerpilot.config import ConfigError
 
-KINDS = ("not finite", "outside the area", "altitude")  # what a refusal is about, for counting
+KINDS = ("not finite", "outside the area", "altitude", "separation")  # what a refusal is about, for counting
 
 
 class OutsideGeofence(ValueError):

@@ -26,6 +26,7 @@ from layerpilot.link.control import Control
 from layerpilot.link.errors import LinkError, LinkLost, WaypointRefused
 from layerpilot.link.frames import enu_to_ned, yaw_enu_to_ned
 from layerpilot.link.geofence import Geofence, OutsideGeofence, check_altitude, check_finite
+from layerpilot.link.separation import Separation
 from layerpilot.link.sync import LinkSync
 from layerpilot.link.vehicle_state import VehicleState
 
@@ -37,8 +38,8 @@ class Guided:
     """Waypoints, the setpoint stream and the waits for arrival of one link."""
 
     def __init__(self, config: LinkConfig, geofence: Geofence | None, state: VehicleState, commands: Commands,
-                 control: Control, port: MavlinkPort, sync: LinkSync) -> None:
-        self.config, self.geofence = config, geofence
+                 control: Control, port: MavlinkPort, sync: LinkSync, separation: Separation | None = None) -> None:
+        self.config, self.geofence, self.separation = config, geofence, separation
         self.state, self.commands, self.control, self.port, self.sync = state, commands, control, port, sync
         self.refused: Counter[str] = Counter()  # refused waypoints by kind (see WaypointRefused)
 
@@ -79,13 +80,15 @@ class Guided:
             self.goto(*target, timeout=timeout)
 
     def set_waypoint(self, x: float, y: float, z: float, yaw: float | None = None,
-                     look_at: tuple[float, float] | None = None, face_waypoint: bool = False) -> np.ndarray:
+                     look_at: tuple[float, float] | None = None, face_waypoint: bool = False,
+                     separate: bool = True) -> np.ndarray:
         """Start flying to map-frame (x, y, z) without waiting; the worker re-sends it. Returns the waypoint.
 
         ``yaw`` (ENU radians), ``look_at`` (a map point to face, e.g. an orbit centre) or
-        ``face_waypoint`` choose the heading; by default the autopilot keeps its own.
+        ``face_waypoint`` choose the heading; by default the autopilot keeps its own. ``separate`` False:
+        a return home, which is never refused for another drone's nearness (live it is the autopilot's RTL).
         """
-        target = self.check(x, y, z)
+        target = self.check(x, y, z, separate)
         self.state.require_link()
         if self.control.paused:
             raise LinkError(f"paused: the pilot has the vehicle in {self.state.mode}; hand back "
@@ -137,12 +140,14 @@ class Guided:
         return False
 
     # --- the geofence -----------------------------------------------------------------
-    def check(self, x: float, y: float, z: float) -> np.ndarray:
-        """The map-frame waypoint as an array if the geofence allows it, else :class:`WaypointRefused`
-        (counted in ``refused``). Sends nothing."""
+    def check(self, x: float, y: float, z: float, separate: bool = True) -> np.ndarray:
+        """The map-frame waypoint as an array if the geofence (and with ``separate`` the fleet's
+        separation) allows it, else :class:`WaypointRefused` (counted in ``refused``). Sends nothing."""
         x, y, z = float(x), float(y), float(z)
         try:
             self._fence_check(x, y, z)
+            if separate and self.separation is not None:
+                self.separation.check(x, y)
         except OutsideGeofence as exc:
             with self.sync.cond:
                 self.refused[exc.kind] += 1

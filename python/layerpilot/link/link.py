@@ -40,6 +40,7 @@ from layerpilot.link.connection import MavlinkPort
 from layerpilot.link.control import Control
 from layerpilot.link.errors import CommandRejected, ControlLost, LinkError, LinkLost, NotReady, WaypointRefused
 from layerpilot.link.geofence import Geofence
+from layerpilot.link.separation import Separation
 from layerpilot.link.guided import Guided
 from layerpilot.link.handover import Handover
 from layerpilot.link.sync import LinkSync
@@ -56,21 +57,23 @@ class FlightLink:
     """A companion-computer MAVLink link to one autopilot. Use as a context manager or call close().
 
     ``clock`` stamps each pose (``Telemetry.time``: the mission clock); ``geofence`` bounds every
-    waypoint. The parts are public for inspection (``state``, ``commands``, ``control``, ``guided``);
+    waypoint; ``separation`` (a fleet's) refuses one too near another drone. The parts are public for inspection (``state``, ``commands``, ``control``, ``guided``);
     fly through the methods here.
     """
 
     def __init__(self, config: LinkConfig | None = None, clock: Callable[[], float] = time.monotonic,
-                 on_event: Callable[[str], None] | None = None, geofence: Geofence | None = None) -> None:
+                 on_event: Callable[[str], None] | None = None, geofence: Geofence | None = None,
+                 separation: Separation | None = None) -> None:
         self.config = config if config is not None else LinkConfig()
-        self.geofence = geofence
+        self.geofence, self.separation = geofence, separation
         self.sync = LinkSync(on_event)
         self.port = MavlinkPort(self.config.url, self.config.source_system, self.config.source_component,
                                 self.config.baud)
         self.state = VehicleState(self.config, clock, self.sync)
         self.commands = Commands(self.config, self.state, self.port, self.sync)
         self.control = Control(self.config, self.state, self.commands, self.sync)
-        self.guided = Guided(self.config, geofence, self.state, self.commands, self.control, self.port, self.sync)
+        self.guided = Guided(self.config, geofence, self.state, self.commands, self.control, self.port, self.sync,
+                             separation)
         self._handover = Handover(self.config, self.state, self.commands, self.control, self.sync)
         self._thread = Thread(target=self._loop, name="flight-link", daemon=True)
         self._thread.start()
@@ -239,9 +242,10 @@ class FlightLink:
         return self.guided.check(x, y, z)
 
     def set_waypoint(self, x: float, y: float, z: float, yaw: float | None = None,
-                     look_at: tuple[float, float] | None = None, face_waypoint: bool = False) -> np.ndarray:
+                     look_at: tuple[float, float] | None = None, face_waypoint: bool = False,
+                     separate: bool = True) -> np.ndarray:
         """Start flying to map-frame (x, y, z) without waiting (see :meth:`Guided.set_waypoint`)."""
-        return self.guided.set_waypoint(x, y, z, yaw, look_at, face_waypoint)
+        return self.guided.set_waypoint(x, y, z, yaw, look_at, face_waypoint, separate)
 
     def goto(self, x: float, y: float, z: float, yaw: float | None = None,
              look_at: tuple[float, float] | None = None, face_waypoint: bool = False,

@@ -14,12 +14,14 @@ from layerpilot.mission.pilot import Pilot
 from layerpilot.mission.replan import GapReplanner
 
 
-def build_pilot(mission: MissionCore) -> Pilot:
-    """The mission's pilot: the decision maker, or a pattern with the lines, speed and mount its camera needs."""
+def build_pilot(mission: MissionCore, vehicle: str | None = None) -> Pilot:
+    """The pilot of ``vehicle`` (default: the mission's first): the decision maker, or a pattern with the lines,
+    speed and mount its camera needs, at the vehicle's altitude layer (``PilotConfig.flown_behavior``)."""
     cfg = mission.decide
     camera, max_range = mission.camera, mission.depth.max_depth
     ratio = preset_for(camera.width).pick.target_baseline_ratio
-    behavior = flight.flight_behavior(cfg.flown_behavior(), camera, max_range)
+    layer = mission.vehicles.index(vehicle) if vehicle is not None else 0
+    behavior = flight.flight_behavior(cfg.flown_behavior(layer), camera, max_range)
     if not behavior.scripted:  # stereo-aware flight: the behavior's heading, survey speed and footprint hops
         speed = flight.cruise_speed(behavior, camera, mission.frame_rate_hz, ratio, cfg.speed)
         view = (flight.camera_view(behavior, HeadingPolicy(behavior, cfg.home), camera, max_range)

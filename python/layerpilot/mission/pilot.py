@@ -46,21 +46,31 @@ class PilotConfig:
     state: str = ""  # directory the survey's state is saved in, for `up --resume` (mission.resume); "" = none
     area: Area | None = None  # the area of interest this mission surveys, instead of the behavior's
     terrain: Terrain | None = None  # terrain following for whatever behavior flies (relief), instead of the behavior's
+    altitude_layer: float = 10.0  # m: a fleet's k-th vehicle (from 0) flies k times this above the behavior's height
 
     def __post_init__(self) -> None:
         check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)
         check_range("decide.speed", self.speed, 0.0, 100.0)
         check_range("decide.battery_reserve", self.battery_reserve, 0.0, 0.9)
         check_range("decide.return_speed", self.return_speed, 0.1, 100.0)
+        check_range("decide.altitude_layer", self.altitude_layer, 0.0, 100.0)
         self.flown_behavior()  # a bad name or file fails when the mission loads
 
-    def flown_behavior(self) -> Behavior:
+    def flown_behavior(self, layer: int = 0) -> Behavior:
         """The behavior file with this mission's area of interest and terrain following, where the mission states
-        them (``[decide.area]``, ``[decide.terrain]``)."""
+        them (``[decide.area]``, ``[decide.terrain]``); ``layer``: a fleet vehicle's place in the mission's list,
+        flown ``layer * altitude_layer`` m higher (the terrain's clearance and floor too), so that drones whose
+        paths cross pass at different heights."""
         behavior = load_behavior(self.behavior)
         if self.area is not None:
             behavior = dataclasses.replace(behavior, area=self.area)
-        return behavior if self.terrain is None else dataclasses.replace(behavior, terrain=self.terrain)
+        if self.terrain is not None:
+            behavior = dataclasses.replace(behavior, terrain=self.terrain)
+        if not (up := layer * self.altitude_layer):
+            return behavior
+        terrain = behavior.terrain
+        return dataclasses.replace(behavior, altitude=behavior.altitude + up, terrain=dataclasses.replace(
+            terrain, clearance=terrain.clearance + up, min_altitude=min(terrain.min_altitude + up, terrain.max_altitude)))
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,7 @@ class MissionPipeline:
                     if "map" in self.roles else None)
         self.depth: dict[str, DepthService] = ({v: build_depth_service(mission) for v in self.vehicles}
                                                if "depth" in self.roles else {})
-        self.pilots: dict[str, Pilot] = ({v: build_pilot(mission) for v in self.vehicles}
+        self.pilots: dict[str, Pilot] = ({v: build_pilot(mission, v) for v in self.vehicles}
                                          if "decide" in self.roles else {})
         home = tuple(float(c) for c in mission.decide.home)
         self._where = {v: (home[0], home[1], 0.0) for v in mission.vehicles}  # each vehicle's newest position

@@ -26,17 +26,20 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Sequence
 
 import zenoh
 
 from layerpilot.bus import keys
 from layerpilot.bus.guard import guarded
-from layerpilot.bus.messages import MissionState, State, Waypoint, decode_mission_state, decode_waypoint, encode_state
+from layerpilot.bus.messages import (MissionState, State, Waypoint, decode_decision, decode_mission_state,
+                                     decode_state, decode_waypoint, encode_state)
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.geometry import Pose
 from layerpilot.link.geofence import Geofence
 from layerpilot.link.link import FlightLink, LinkError, WaypointRefused
+from layerpilot.link.separation import Separation
 from layerpilot.mission.clock import MissionClock
 from layerpilot.missionfile import LinkSettings
 from layerpilot.mission.energy import RETURN_PHASE
@@ -59,18 +62,24 @@ class LinkNode:
     (``supervisor.failure`` says why). ``end`` says what the end action did (see :meth:`stop`)."""
 
     def __init__(self, session: zenoh.Session, vehicle: str, cfg: LinkSettings, geofence: Geofence,
-                 mission_clock: MissionClock = MissionClock()) -> None:
+                 mission_clock: MissionClock = MissionClock(), fleet: Sequence[str] = ()) -> None:
+        """``fleet``: the mission's vehicles; with others than this one (and ``cfg.separation`` > 0) the
+        link hears their poses and decisions and refuses a waypoint nearer them than the separation."""
         self.session, self.keys, self.cfg = session, keys.Keys(vehicle), cfg
+        self.fleet = tuple(v for v in fleet if v != vehicle)
         self.mission_clock = mission_clock  # pose stamps: the autopilot's time_boot_ms on the mission clock
         self.rejects = Rejects(_log)
         self.supervisor = Supervisor(_log)
         self.connected = threading.Event()
         self.phase = "connecting"
         self._t0 = time.monotonic()
-        self.link = FlightLink(cfg.link, clock=self.clock, geofence=geofence)
+        self.separation = (Separation(cfg.separation, cfg.separation_stale_s) if self.fleet and cfg.separation > 0
+                           else None)
+        self.link = FlightLink(cfg.link, clock=self.clock, geofence=geofence, separation=self.separation)
         self._stop = threading.Event()
         self._sub = None
         self._state_sub = None
+        self._fleet_subs: list = []
         self.homeward = threading.Event()  # the pilot turned home for the battery: RTL
         self.waypoints = 0
         self._last_seq = -1
@@ -111,8 +120,26 @@ class LinkNode:
                                                             self.supervisor))
         self._state_sub = self.session.declare_subscriber(self.keys.state, guarded(
             decode_mission_state, self._on_mission_state, self.rejects, self.supervisor))
+        if self.separation is not None:  # the other drones: where they are and where they go
+            self._fleet_subs = [
+                self.session.declare_subscriber(keys.all_vehicles("pose"), guarded(
+                    decode_state, lambda s, key: self._on_other(key, s.vehicle, position=s.position), self.rejects,
+                    self.supervisor)),
+                self.session.declare_subscriber(keys.all_vehicles("decision"), guarded(
+                    decode_decision, lambda d, key: self._on_other(key, d.vehicle, target=d.waypoint), self.rejects,
+                    self.supervisor))]
         self.phase = "flying"  # listening: a waypoint heard before is held, and decide repeats it
         self._watch(stop)
+
+    def _on_other(self, key: str, vehicle: str, position=None, target=None) -> None:
+        """Another drone's pose or decision, for the separation; this vehicle's own are not news."""
+        sender = keys.vehicle_of(key)
+        if sender == self.keys.vehicle:
+            return
+        if sender not in self.fleet or vehicle != sender:
+            raise BadMessage("unknown vehicle", f"{vehicle!r} on {key}: not one of the mission's other vehicles "
+                                                f"{list(self.fleet)}")
+        self.separation.heard(sender, position, target)
 
     def _on_mission_state(self, s: MissionState, key: str) -> None:
         if s.phase == RETURN_PHASE:
@@ -197,8 +224,10 @@ class LinkNode:
                 self._speed = w.speed
             self.link.set_waypoint(*w.position, yaw=None if math.isnan(w.yaw) else w.yaw, face_waypoint=True)
             self.waypoints += 1
-        except WaypointRefused as exc:  # outside the geofence (area, altitude) or not finite
+        except WaypointRefused as exc:  # outside the geofence (area, altitude), not finite, or too near a drone
             self.rejects.reject(key, BadMessage(f"waypoint refused ({exc.kind})", str(exc)))
+            if exc.kind == "separation":  # decide's repeat tries it again: the other drone moves on
+                self._last_seq = -1
         except (LinkError, ValueError) as exc:  # the pilot has the vehicle, the link is lost
             self.rejects.reject(key, BadMessage("waypoint refused", str(exc)))
 
@@ -238,7 +267,7 @@ class LinkNode:
         """No more waypoints, then the mission's end action (``end_action``, bounded by ``end_timeout``),
         then close the link. ``end`` says what happened (``RTL acknowledged ...`` or why not)."""
         self._stop.set()
-        for sub in (self._sub, self._state_sub):
+        for sub in (self._sub, self._state_sub, *self._fleet_subs):
             if sub is not None:
                 sub.undeclare()
         self.supervisor.join()
