@@ -79,13 +79,15 @@ def test_fleet_tracker_counts_the_closest_approach_and_the_columns_seen_twice() 
     tracker.positions(2.0, {"a": (0.0, 0.0, 50.0), "b": (9.0, 8.0, 61.0), "c": (100.0, 0.0, 10.0)})
     assert tracker.min_separation == 10.0 and tracker.closest == (1.0, "a", "b")  # horizontal only
     assert tracker.metrics()["fleet_min_height_gap_near_m"] == 40.0  # at t = 1; at t = 2 12.04 m apart: not near
-    tracker.saw("a", np.array([[0.5, 0.5, 3.0], [1.5, 0.5, 3.0], [3.5, 1.5, 0.0], [-1.0, 0.5, 0.0]]))
-    tracker.saw("b", np.array([[1.2, 0.1, 9.0], [2.5, 1.5, 0.0]]))
+    tracker.saw("a", np.array([[0.5, 0.5, 3.0], [1.5, 0.5, 3.0], [3.5, 1.5, 0.0], [-1.0, 0.5, 0.0]]), 1.0)
+    tracker.saw("b", np.array([[1.2, 0.1, 9.0], [2.5, 1.5, 0.0]]), 2.0)
     m = tracker.metrics()
     # seen in the area: (0,0) (0,1) by a, (0,1) (1,2) by b -> 3 columns, 1 twice; (1,3) is outside it
     assert m["fleet_duplicate_coverage"] == pytest.approx(1 / 3)
     assert m["seen_a"] == pytest.approx(100 * 2 / 7) and m["seen_b"] == pytest.approx(100 * 2 / 7)
     assert m["seen_c"] == 0.0 and m["fleet_min_separation_m"] == 10.0
+    early = tracker.metrics(until=1.5)  # before b's cloud: nothing seen twice yet
+    assert early["fleet_duplicate_coverage"] == 0.0 and early["seen_b"] == m["seen_b"]
     with pytest.raises(ValueError, match="aoi: shape"):
         FleetTracker(g, np.ones((3, 3), bool), ["a"])
 

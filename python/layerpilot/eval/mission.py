@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -53,6 +54,7 @@ from layerpilot.decide import area_geometry, zone_mask
 from layerpilot.depth.source import GroundTruthDepth
 from layerpilot.eval.alignment import MapScorer, MapSnapshot
 from layerpilot.eval.fleet import FleetTracker
+from layerpilot.eval.milestones import time_to_percent
 from layerpilot.eval.pose_errors import pose_errors
 from layerpilot.eval.run_frame import write_run_frame
 from layerpilot.eval.series import SAMPLE_INTERVAL, SeriesSampler
@@ -383,7 +385,8 @@ class LockstepMission:
         fleet's separation: a refused command is sent again each step, as the decide node repeats it)."""
         pilot, link = self.pipeline.pilots[drone.name], drone.link
         evaluations = pilot.evaluations
-        avoid, yield_to = self._others(drone) if len(self.drones) > 1 else ((), ())
+        coordinated = len(self.drones) > 1 and self.mission.decide.coordinate
+        avoid, yield_to = self._others(drone) if coordinated else ((), ())
         command = self.pipeline.tick(drone.name, t, drone.columns, battery=charge, avoid=avoid, yield_to=yield_to)
         first = drone is self.drones[0]
         if first and self.record_inputs and pilot.evaluations != evaluations:
@@ -435,7 +438,7 @@ class LockstepMission:
             if (cloud := self.pipeline.frame(drone.name, frame)) is not None:
                 self.pipeline.cloud(drone.name, cloud, max_range)
                 if fleet:
-                    self.fleet.saw(drone.name, cloud.points)
+                    self.fleet.saw(drone.name, cloud.points, t)
 
         def truth() -> None:
             if (cloud := self.truth.push(reference)) is not None and len(cloud):
@@ -483,8 +486,9 @@ class LockstepMission:
         run = {"mission_s": round(t, 2), "wall_s": round(wall_s, 2),
                "real_time_factor": round(t / max(wall_s, 1e-9), 2)}
         extra = self._pose_errors(lead, depths[0].trajectory())
-        if len(self.drones) > 1:
-            extra.update(self.fleet.metrics())
+        if len(self.drones) > 1:  # work done twice while there was work to share: up to 90 % of the area
+            t90 = time_to_percent(self.sampler.series, 90.0)
+            extra.update(self.fleet.metrics(until=t if math.isnan(t90) else t90))
         path = (np.array(lead.path).reshape(-1, 2) if len(self.drones) == 1
                 else {d.name: np.array(d.path).reshape(-1, 2) for d in self.drones})
         paths = write_run_report(out, f"layerpilot mission: {mission.decide.behavior}", self.sampler.series,

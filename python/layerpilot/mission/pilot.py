@@ -47,6 +47,7 @@ class PilotConfig:
     area: Area | None = None  # the area of interest this mission surveys, instead of the behavior's
     terrain: Terrain | None = None  # terrain following for whatever behavior flies (relief), instead of the behavior's
     altitude_layer: float = 10.0  # m: a fleet's k-th vehicle (from 0) flies k times this above the behavior's height
+    coordinate: bool = True  # a fleet's pilots avoid each other's targets; false: each decides alone (a baseline)
 
     def __post_init__(self) -> None:
         check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)

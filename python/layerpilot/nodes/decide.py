@@ -218,8 +218,9 @@ class DecideNode:
                 return False
             fresh, self._fresh = self._fresh, False
             columns, state = self._columns, self._state
-            avoid = list(self._others.values())
-            yield_to = [t for v, t in self._others.items() if self._has_priority(v)]
+            others = self._others if self.mission.decide.coordinate else {}  # false: each decides alone
+            avoid = list(others.values())
+            yield_to = [t for v, t in others.items() if self._has_priority(v)]
         self._repeat_waypoint()
         if not fresh or state is None:
             return True
