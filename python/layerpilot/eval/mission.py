@@ -11,7 +11,8 @@ steps on every simulator step with the newest one, as the decide node does with 
 set and pose it heard. Everything is a function of the seeds: the take-off (connect, pre-arm,
 GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's wall-clock waits and is not scored;
 when it is done the vehicle is placed exactly at the hover point (0, 0, altitude) at rest with a
-full battery and the mission clock starts at 0 there. Two runs with the same mission are identical
+full battery and the mission clock starts at 0 there. A fleet (``mission.vehicles``) flies every vehicle
+so, each from its own simulator and link, the k-th ``START_SPACING * k`` m east of the first. Two runs with the same mission are identical
 to the bit. The pilot hears the battery as the autopilot reports it (SYS_STATUS's whole percent);
 once it turns home for the battery the mission ends when it is there (``ended`` in the report).
 
@@ -66,6 +67,7 @@ from layerpilot.link.config import LinkConfig
 from layerpilot.link.link import FlightLink, WaypointRefused
 from layerpilot.link.separation import Separation
 from layerpilot.map import VoxelMap
+from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
 from layerpilot.missionfile import geofence_for
 from layerpilot.missionfile import Mission, to_settings
@@ -205,7 +207,7 @@ class Drone:
     telemetry: list[tuple[float, Pose]] = field(default_factory=list)  # poses since the last frame, for depth
     camera_poses: dict[str, list[tuple[float, Pose]]] = field(default_factory=lambda: {"truth": [], "raw": []})
     separation: Separation | None = None  # a fleet's: what this drone's link hears of the others
-    columns: object = None  # the newest layer set, decoded
+    columns: ColumnLayers | None = None  # the newest layer set, decoded
     message: bytes | None = None  # ... and as it went over the wire
     frames: int = 0
     refused: Command | None = None  # a command refused for separation, sent again each step until it passes
