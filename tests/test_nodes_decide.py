@@ -61,7 +61,7 @@ def test_decides_on_arrival_and_avoids_the_other_drone(sessions, tmp_path):
         assert len(before) == 1 and "no decision tick yet" in before[0].err.payload.to_string()
         world.put(k1.layers, layer_payload("uav1"))
         world.put(k1.pose, msg.encode_state(msg.State(2.0, "uav1", Pose(np.array([0.0, 0.0, 50.0])))))
-        wait_for(lambda: len(got["uav1"]) >= 1, "uav1's first waypoint")
+        wait_for(lambda: len(got["uav1"]) >= 1 and decisions, "uav1's first waypoint and its decision")
         w1 = got["uav1"][0]
         assert w1.seq == 1 and w1.position[2] == 50.0
         assert 10.0 <= np.hypot(*w1.position[:2]) <= 100.0  # outside r_e, inside the area of interest
@@ -181,3 +181,24 @@ def test_live_node_follows_the_weight_schedule(sessions, tmp_path):
         wait_for(lambda: len(decisions) >= 2, "the second decision")
         weighted = [{t.name for t in d.terms if t.weight > 0} - {"zone", "preference", "history"} for d in decisions]
         assert weighted[:2] == [{"fringe"}, {"time"}]
+
+
+def test_a_drone_that_drops_out_frees_its_target(sessions):
+    """Its decide node repeats its waypoint every second; when that stops for claim_timeout_s (the drone's
+    processes were killed, its link lost) the others stop avoiding its target."""
+    node_session, world = sessions
+    mission = Mission(vehicles=["uav1", "uav2"], decide=PilotConfig(claim_timeout_s=1.5))
+    node = DecideNode(node_session, "uav2", mission)
+    node.start()
+    try:
+        time.sleep(0.3)
+        repeat = msg.encode_waypoint(msg.Waypoint(1.0, "uav1", 1, np.array([40.0, 10.0, 50.0])))
+        for _ in range(8):  # 2.4 s of repeats: longer than the timeout, still claimed
+            world.put(Keys("uav1").waypoint, repeat)
+            time.sleep(0.3)
+        assert np.array_equal(node._others["uav1"], [40.0, 10.0])
+        wait_for(lambda: "uav1" not in node._others, "uav1's claim to expire", timeout=5.0)
+        world.put(Keys("uav3").waypoint, repeat)  # not a vehicle of the mission: rejected, counted
+        wait_for(lambda: node.rejects.total == 1, "the stranger's waypoint rejected")
+    finally:
+        node.stop()

@@ -48,6 +48,7 @@ class PilotConfig:
     terrain: Terrain | None = None  # terrain following for whatever behavior flies (relief), instead of the behavior's
     altitude_layer: float = 10.0  # m: a fleet's k-th vehicle (from 0) flies k times this above the behavior's height
     coordinate: bool = True  # a fleet's pilots avoid each other's targets; false: each decides alone (a baseline)
+    claim_timeout_s: float = 10.0  # s: a drone not heard from this long dropped out; its target is free again
 
     def __post_init__(self) -> None:
         check_range("decide.arrival_radius", self.arrival_radius, 0.1, 1000.0)
@@ -55,6 +56,7 @@ class PilotConfig:
         check_range("decide.battery_reserve", self.battery_reserve, 0.0, 0.9)
         check_range("decide.return_speed", self.return_speed, 0.1, 100.0)
         check_range("decide.altitude_layer", self.altitude_layer, 0.0, 100.0)
+        check_range("decide.claim_timeout_s", self.claim_timeout_s, 0.5, 3600.0)
         self.flown_behavior()  # a bad name or file fails when the mission loads
 
     def flown_behavior(self, layer: int = 0) -> Behavior:

@@ -30,7 +30,7 @@ from layerpilot.bus.guard import guarded
 from layerpilot.bus.layerset import GridLayersMessage
 from layerpilot.bus.layerset import decode_layer_set, encode_layer_set, to_column_layers
 from layerpilot.bus.messages import (Decision, MissionState, State, Term, Waypoint, decode_decision, decode_state,
-                                     encode_decision, encode_mission_state, encode_waypoint)
+                                     decode_waypoint, encode_decision, encode_mission_state, encode_waypoint)
 from layerpilot.bus.reject import BadMessage, Rejects
 from layerpilot.bus.session import publish
 from layerpilot.decide.maker import TickTerms
@@ -124,6 +124,7 @@ class DecideNode:
         self._state: State | None = None
         self._fresh = False  # a new layer set or pose since the last step
         self._others: dict[str, np.ndarray] = {}  # vehicle -> its current target (x, y)
+        self._heard: dict[str, float] = {}  # vehicle -> when its decision or repeated waypoint came (monotonic s)
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._decls: list = []
@@ -149,6 +150,7 @@ class DecideNode:
             s.declare_subscriber(k.layers, guarded(self._decode_layers, self._on_layers, r, sv)),
             s.declare_subscriber(k.pose, guarded(decode_state, self._on_state, r, sv)),
             s.declare_subscriber(keys.all_vehicles("decision"), guarded(decode_decision, self._on_other, r, sv)),
+            s.declare_subscriber(keys.all_vehicles("waypoint"), guarded(decode_waypoint, self._on_other, r, sv)),
             s.declare_queryable(k.aggregates, self._on_aggregates),
         ]
         self.supervisor.start("decide", self._iteration)
@@ -199,16 +201,21 @@ class DecideNode:
             self._state, self._fresh = state, True
             self._cond.notify()
 
-    def _on_other(self, d: Decision, key: str) -> None:
+    def _on_other(self, d: Decision | Waypoint, key: str) -> None:
+        """Another drone's decision, or its waypoint as its decide node repeats it (which keeps its target
+        claimed: one silent for ``decide.claim_timeout_s`` dropped out and its target is free again)."""
         vehicle = keys.vehicle_of(key)
         if vehicle not in self.mission.vehicles or d.vehicle != vehicle:  # state only for the mission's vehicles
-            raise BadMessage("unknown vehicle", f"decision of {d.vehicle!r} on {key}: not one of the mission's "
-                                                f"other vehicles {self.mission.vehicles}")
+            raise BadMessage("unknown vehicle", f"{type(d).__name__.lower()} of {d.vehicle!r} on {key}: not one of "
+                                                f"the mission's other vehicles {self.mission.vehicles}")
         if vehicle != self.keys.vehicle:
+            target = d.waypoint if isinstance(d, Decision) else d.position
             with self._cond:
-                self._others[vehicle] = d.waypoint[:2].copy()
-                self._fresh = True  # a drone with priority may have taken our target
-                self._cond.notify()
+                self._heard[vehicle] = time.monotonic()
+                old, self._others[vehicle] = self._others.get(vehicle), target[:2].copy()
+                if old is None or not np.array_equal(old, self._others[vehicle]):  # a repeat is no news
+                    self._fresh = True  # a drone with priority may have taken our target
+                    self._cond.notify()
 
     def _iteration(self) -> bool:
         """Wait for a new layer set or pose (or the repeat period), step the pilot, publish; False = stop."""
@@ -218,6 +225,7 @@ class DecideNode:
                 return False
             fresh, self._fresh = self._fresh, False
             columns, state = self._columns, self._state
+            self._expire_claims()
             others = self._others if self.mission.decide.coordinate else {}  # false: each decides alone
             avoid = list(others.values())
             yield_to = [t for v, t in others.items() if self._has_priority(v)]
@@ -264,6 +272,13 @@ class DecideNode:
             query.reply_err(f"aggregates: {type(exc).__name__}: {exc}".encode())
         finally:
             query.drop()
+
+    def _expire_claims(self) -> None:
+        """Forget the target of a drone not heard from for ``decide.claim_timeout_s`` (held: ``_cond``)."""
+        now, timeout = time.monotonic(), self.mission.decide.claim_timeout_s
+        for vehicle in [v for v, heard in self._heard.items() if now - heard > timeout]:
+            del self._heard[vehicle], self._others[vehicle]
+            _log.warning("%s not heard from for %g s: its target is free again", vehicle, timeout)
 
     def _has_priority(self, vehicle: str) -> bool:
         """Vehicles listed earlier in the mission have priority when two choose the same spot."""
