@@ -71,7 +71,7 @@ from layerpilot.map.columns import ColumnLayers
 from layerpilot.mission import resume as survey
 from layerpilot.missionfile import geofence_for
 from layerpilot.missionfile import Mission, to_settings
-from layerpilot.mission.pilot import Command
+from layerpilot.mission.pilot import WAYPOINT_REPEAT_S, Command, fleet_targets
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.progress import Progress
 from layerpilot.sim.simulator import Simulator
@@ -210,7 +210,8 @@ class Drone:
     columns: ColumnLayers | None = None  # the newest layer set, decoded
     message: bytes | None = None  # ... and as it went over the wire
     frames: int = 0
-    refused: Command | None = None  # a command refused for separation, sent again each step until it passes
+    refused: Command | None = None  # a command refused for separation, sent again until it passes
+    refused_at: float = 0.0  # mission time it was last refused
 
 
 class LockstepMission:
@@ -363,57 +364,52 @@ class LockstepMission:
                                             view.near)
         drone.columns = wire.to_column_layers(wire.decode_layer_set(drone.message))
 
-    def _others(self, drone: Drone) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """The other drones' current targets (to avoid) and those of the drones before it (to yield to)."""
-        avoid, yield_to, before = [], [], True
-        for other in self.drones:
-            if other is drone:
-                before = False
-            elif (target := self.pipeline.pilots[other.name].target) is not None:
-                avoid.append(target[:2])
-                if before:
-                    yield_to.append(target[:2])
-        return avoid, yield_to
+    def _targets(self) -> dict[str, np.ndarray]:
+        """Each drone's current target (x, y), as its decisions tell the others."""
+        return {d.name: target[:2] for d in self.drones
+                if (target := self.pipeline.pilots[d.name].target) is not None}
 
     def _hear_each_other(self, shots) -> None:
         """Each drone's link hears where the others are (as reported) and where they go (their targets)."""
+        targets = self._targets()
         for drone in self.drones:
             for other, position, _, _ in shots:
                 if other is not drone:
-                    drone.separation.heard(other.name, position, self.pipeline.pilots[other.name].target)
+                    drone.separation.heard(other.name, position, targets.get(other.name))
 
     def _pilot_step(self, drone: Drone, position: np.ndarray, t: float, charge: float) -> None:
-        """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence (and a
-        fleet's separation: a refused command is sent again each step, as the decide node repeats it)."""
+        """The pilot's tick; a command goes to the vehicle over MAVLink, through the link's geofence and a
+        fleet's separation."""
         pilot, link = self.pipeline.pilots[drone.name], drone.link
         evaluations = pilot.evaluations
-        coordinated = len(self.drones) > 1 and self.mission.decide.coordinate
-        avoid, yield_to = self._others(drone) if coordinated else ((), ())
+        avoid, yield_to = (fleet_targets(self.vehicles, drone.name, self._targets(), self.mission.decide.coordinate)
+                           if len(self.drones) > 1 else ((), ()))
         command = self.pipeline.tick(drone.name, t, drone.columns, battery=charge, avoid=avoid, yield_to=yield_to)
         first = drone is self.drones[0]
         if first and self.record_inputs and pilot.evaluations != evaluations:
             self.inputs.append(PilotInput(t, tuple(float(c) for c in position), drone.message, command))
         if command is None:
-            if drone.refused is not None:
-                self._send(drone, drone.refused)
+            if drone.refused is not None and t - drone.refused_at >= WAYPOINT_REPEAT_S - 1e-9:
+                self._send(drone, drone.refused, t)
             return
         record = command.record() if len(self.drones) == 1 else {"vehicle": drone.name, **command.record()}
-        if (refusal := self._send(drone, command)) is not None:
+        if (refusal := self._send(drone, command, t)) is not None:
             record["refused"] = refusal
         drone.records.append(record)
         if self.view is not None and first:  # with the tick's A0..A3 when the maker chose it
             self.view.decision(t, record, None if command.decision is None else pilot.maker.last_tick)
 
-    def _send(self, drone: Drone, command: Command) -> str | None:
-        """The command to the vehicle over MAVLink; why the link refused it, or None. As in the link node, a
-        refused waypoint is counted and the vehicle keeps on; one refused for separation waits its turn."""
+    def _send(self, drone: Drone, command: Command, t: float) -> str | None:
+        """The command to the vehicle over MAVLink at mission time ``t``; why the link refused it, or None. As
+        in the link node, a refused waypoint is counted and the vehicle keeps on; one refused for separation
+        is sent again every ``WAYPOINT_REPEAT_S``, as the decide node repeats its waypoint."""
         link = drone.link
         try:
             link.set_waypoint(*command.position, yaw=command.yaw, separate=command.reason != "battery")
         except WaypointRefused as exc:
             if link.refused[exc.kind] == 1:
                 _log.warning("waypoint refused by the link of %s: %s", drone.name, exc)
-            drone.refused = command if exc.kind == "separation" else None
+            drone.refused, drone.refused_at = (command if exc.kind == "separation" else None), t
             return str(exc)
         drone.refused = None
         return None

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -74,6 +74,20 @@ class PilotConfig:
         terrain = behavior.terrain
         return dataclasses.replace(behavior, altitude=behavior.altitude + up, terrain=dataclasses.replace(
             terrain, clearance=terrain.clearance + up, min_altitude=min(terrain.min_altitude + up, terrain.max_altitude)))
+
+
+WAYPOINT_REPEAT_S = 1.0  # s: a driver re-sends the current waypoint this often until reached (a late link gets it)
+
+
+def fleet_targets(vehicles: Sequence[str], me: str, targets: Mapping[str, Sequence[float]],
+                  coordinate: bool = True) -> tuple[list[Sequence[float]], list[Sequence[float]]]:
+    """``(avoid, yield_to)`` for ``me``'s pilot from the other drones' current targets (vehicle -> x, y):
+    every other's to keep r_e from, and those of the vehicles listed before ``me`` in the mission, which
+    have priority when two choose the same spot. Nothing with ``coordinate`` False (each decides alone)."""
+    if not coordinate:
+        return [], []
+    others = [(v, t) for v, t in targets.items() if v != me]
+    return [t for _, t in others], [t for v, t in others if vehicles.index(v) < vehicles.index(me)]
 
 
 @dataclass(frozen=True)

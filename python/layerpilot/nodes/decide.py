@@ -39,12 +39,11 @@ from layerpilot.mission import resume as survey
 from layerpilot.missionfile import geofence_for
 from layerpilot.mission.energy import RETURN_PHASE
 from layerpilot.missionfile import Mission
-from layerpilot.mission.pilot import Command
+from layerpilot.mission.pilot import WAYPOINT_REPEAT_S, Command, fleet_targets
 from layerpilot.mission.pipeline import MissionPipeline
 from layerpilot.nodes.supervise import Supervisor
 
 _log = logging.getLogger("layerpilot.decide")
-REPEAT_PERIOD = 1.0  # s: the current waypoint is re-sent this often until reached
 INPUT_ERRORS = (ValueError, ArithmeticError)  # what a layer set or pose can provoke in the pilot: that input's fault
 # A pose the drone cannot have: a stamp off the mission clock, or a place far outside the geofence.
 # One such pose would poison the pilot's clock or path (its arrival, retarget and schedule times).
@@ -220,15 +219,14 @@ class DecideNode:
     def _iteration(self) -> bool:
         """Wait for a new layer set or pose (or the repeat period), step the pilot, publish; False = stop."""
         with self._cond:
-            self._cond.wait_for(lambda: self._stop.is_set() or self._fresh, timeout=REPEAT_PERIOD)
+            self._cond.wait_for(lambda: self._stop.is_set() or self._fresh, timeout=WAYPOINT_REPEAT_S)
             if self._stop.is_set():
                 return False
             fresh, self._fresh = self._fresh, False
             columns, state = self._columns, self._state
             self._expire_claims()
-            others = self._others if self.mission.decide.coordinate else {}  # false: each decides alone
-            avoid = list(others.values())
-            yield_to = [t for v, t in others.items() if self._has_priority(v)]
+            avoid, yield_to = fleet_targets(self.mission.vehicles, self.keys.vehicle, self._others,
+                                            self.mission.decide.coordinate)
         self._repeat_waypoint()
         if not fresh or state is None:
             return True
@@ -280,14 +278,9 @@ class DecideNode:
             del self._heard[vehicle], self._others[vehicle]
             _log.warning("%s not heard from for %g s: its target is free again", vehicle, timeout)
 
-    def _has_priority(self, vehicle: str) -> bool:
-        """Vehicles listed earlier in the mission have priority when two choose the same spot."""
-        vehicles = self.mission.vehicles
-        return vehicles.index(vehicle) < vehicles.index(self.keys.vehicle)
-
     def _repeat_waypoint(self) -> None:
         """A link that started (or restarted) late still gets its target (transport pacing: wall clock)."""
-        if self._waypoint_msg is not None and time.monotonic() - self._sent_at >= REPEAT_PERIOD:
+        if self._waypoint_msg is not None and time.monotonic() - self._sent_at >= WAYPOINT_REPEAT_S:
             publish(self.session, self.keys.waypoint, self._waypoint_msg)
             publish(self.session, self.keys.state, self._state_msg)  # a battery return, too, reaches a late link
             self._sent_at = time.monotonic()
