@@ -11,10 +11,11 @@ steps on every simulator step with the newest one, as the decide node does with 
 set and pose it heard. Everything is a function of the seeds: the take-off (connect, pre-arm,
 GUIDED, arm, NAV_TAKEOFF over MAVLink) is paced by the link's wall-clock waits and is not scored;
 when it is done the vehicle is placed exactly at the hover point (0, 0, altitude) at rest with a
-full battery and the mission clock starts at 0 there. A fleet (``mission.vehicles``) flies every vehicle
-so, each from its own simulator and link, the k-th ``START_SPACING * k`` m east of the first. Two runs with the same mission are identical
-to the bit. The pilot hears the battery as the autopilot reports it (SYS_STATUS's whole percent);
-once it turns home for the battery the mission ends when it is there (``ended`` in the report).
+full battery and the mission clock starts at 0 there. A fleet (``mission.vehicles``) flies every
+vehicle so, each from its own simulator and link, the k-th ``START_SPACING * k`` m east of the
+first. Two runs with the same mission are identical to the bit. The pilot hears the battery as the
+autopilot reports it (SYS_STATUS's whole percent); once it turns home for the battery the mission
+ends when it is there (``ended`` in the report).
 
 Stages overlap where the data allows (``evaluation.overlap``): a frame's stereo and insertion run
 on one worker and the ground-truth reference on another while the simulator flies on and renders
@@ -41,7 +42,7 @@ import logging
 import math
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field, replace
@@ -174,15 +175,6 @@ def flight_link(mission: Mission, url: str, separation: Separation | None = None
     frame must not look like a lost link."""
     return FlightLink(LinkConfig(url=url, heartbeat_timeout_s=600.0), geofence=geofence_for(mission),
                       separation=separation)
-
-
-def _merged(counts) -> dict[str, int]:
-    """Counts per kind summed over the drones, in the order the kinds first came."""
-    out: dict[str, int] = {}
-    for c in counts:
-        for kind, n in c.items():
-            out[kind] = out.get(kind, 0) + n
-    return out
 
 
 def _json_default(value):
@@ -475,7 +467,7 @@ class LockstepMission:
                     "retargets": sum(r["reason"] == "retarget" for r in records),
                     "replans": sum(p.replans for p in pilots),  # a pattern's next flights over its gaps
                     "geofence": link.geofence.describe(),
-                    "waypoints_refused": _merged(d.link.refused for d in self.drones),
+                    "waypoints_refused": dict(sum((d.link.refused for d in self.drones), Counter())),
                     "frames": sum(d.frames for d in self.drones), "clouds": sum(s.clouds for s in depths),
                     **{f"depth_{k}": v for k, v in depths[0].stats().items()}}  # why frames gave no cloud
         if len(self.drones) > 1:
