@@ -5,6 +5,7 @@ matplotlib's Agg backend only (no display); every function writes one PNG and re
 
 from __future__ import annotations
 
+import itertools
 import os
 import warnings
 from pathlib import Path
@@ -96,7 +97,7 @@ def plot_flight_path(
     xs, ys = g.cell_centers()
     ax.contour(xs, ys, aoi.astype(float), levels=[0.5], colors="yellow", linewidths=1.2)
     drawn = False
-    for (name, p), color in zip(paths.items(), PATH_COLORS * len(paths)):
+    for (name, p), color in zip(paths.items(), itertools.cycle(PATH_COLORS)):
         if not len(p):
             continue
         ax.plot(p[:, 0], p[:, 1], color=color, linewidth=1.0, label=name or None)
