@@ -6,6 +6,8 @@ statistics every ``map_period`` seconds, and turns each layer set into layer ima
 On the same period it asks the decide node for the last tick's aggregate layers A0..A3 (a
 queryable: the decide node sends them to no one else) and plots each node's health
 (``health/<node>``: the counters of its status line, their rates, heartbeat and input ages).
+In a fleet the view also follows the other drones: each one's position and current target
+(their ``pose`` and ``decision``), drawn beside the followed drone's.
 A bad message is rejected and counted like in any node; the view never publishes anything.
 When nothing at all came in the first SILENCE seconds, it says so once (``warn``, and the
 scene's ``log``): a view on the wrong endpoint or vehicle, or with no mission, looks like a
@@ -39,6 +41,7 @@ from layerpilot.viz.scene import MissionScene, area_outline
 _log = logging.getLogger("layerpilot.view")
 DECODERS = {"camera": msg.decode_frame, "pose": msg.decode_state, "layers": decode_layer_set,
             "decision": msg.decode_decision, "waypoint": msg.decode_waypoint, "state": msg.decode_mission_state}
+FLEET_TOPICS = {"pose": msg.decode_state, "decision": msg.decode_decision}  # what the view hears of the other drones
 # no clouds: they are the map server's, the view shows its map (and a cloud crossing a ground link costs MBs)
 VOXEL_BOX = 500  # voxels per side of the box the view asks the map server for
 SILENCE = 5.0  # s without a single message before the view says it hears nothing
@@ -78,6 +81,10 @@ class LiveView:
                                      self.behavior.area.polygon))
         self._subs = [self.session.declare_subscriber(self.keys.topic(topic), self._on_sample) for topic in DECODERS]
         self._subs.append(self.session.declare_subscriber(f"{keys.PREFIX}/{self.vehicle}/health/*", self._on_health))
+        for other in self.mission.vehicles:
+            if other != self.vehicle:
+                self._subs += [self.session.declare_subscriber(keys.Keys(other).topic(t), self._on_fleet)
+                               for t in FLEET_TOPICS]
         self._thread.start()
 
     def stop(self) -> None:
@@ -99,6 +106,22 @@ class LiveView:
         with self._lock:
             self.heard["health"] += 1
             self._newest.setdefault("health", []).append(health)
+
+    def _on_fleet(self, sample: zenoh.Sample) -> None:
+        """Another drone's pose or decision: its newest position or target, checked against its key."""
+        self._any.set()
+        key = str(sample.key_expr)
+        name, topic = key.split("/")[-2:]
+        try:
+            message = FLEET_TOPICS[topic](sample.payload.to_bytes())
+            if message.vehicle != name:
+                raise BadMessage("wrong key", f"{topic} of {message.vehicle} on {key}")
+        except BadMessage as exc:
+            self.rejects.reject(key, exc)
+            return
+        with self._lock:
+            self.heard[f"fleet/{topic}"] += 1
+            self._newest.setdefault("fleet", {}).setdefault(name, {})[topic] = message
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         self._any.set()
@@ -174,6 +197,12 @@ class LiveView:
             if self.metrics is not None:
                 self.scene.scalars("metrics", self.metrics(columns, self._area(columns), max(self._now, ls.stamp)))
             self.logged["layers"] += 1
+        for name, heard in newest.get("fleet", {}).items():
+            pose, decision = heard.get("pose"), heard.get("decision")
+            self.scene.at(self._now)
+            self.scene.fleet_member(name, None if pose is None else pose.pose.position,
+                                    None if decision is None else decision.waypoint)
+            self.logged[f"fleet/{name}"] += 1
         for health in newest.get("health", []):  # no mission stamp of their own: logged at the newest one heard
             self.scene.at(self._now)
             self.scene.scalars(f"health/{health.node}", self._health_series(health))

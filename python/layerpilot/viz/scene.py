@@ -143,6 +143,14 @@ class MissionScene:
         self._path.append(np.asarray(pose.position, np.float64))
         del self._path[:-MAX_PATH]
 
+    def fleet_member(self, name: str, position: Sequence[float] | None, target: Sequence[float] | None) -> None:
+        """Another drone of the fleet: where it is and where it is going (either may be unknown yet)."""
+        if position is not None:
+            self.stream.log(f"world/fleet/{name}", rr.Points3D([position], radii=[1.5], colors=[[60, 140, 255]],
+                                                                labels=[name]))
+        if target is not None:
+            self.stream.log(f"world/fleet/{name}/target", rr.Points3D([target], radii=[1.0], colors=[[60, 140, 255]]))
+
     def path(self) -> None:
         """The flight path so far (logged on the caller's period: each call stores the whole path again)."""
         if len(self._path) > 1:
