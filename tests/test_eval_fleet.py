@@ -10,7 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from layerpilot.cli.eval import fleet
+from rerun.chunk import RrdReader
+
+from layerpilot.cli.eval import _run, fleet
 from layerpilot.eval.fleet import FleetTracker
 from layerpilot.eval.mission import START_SPACING, LockstepMission
 from layerpilot.grid import GridGeometry
@@ -33,6 +35,14 @@ def test_two_drones_share_one_map_keep_their_targets_apart_and_map_more_than_one
     assert two_drones.vehicles == ["uav1", "uav2"]
     two = LockstepMission(two_drones)
     pair = two.run(tmp_path / "two")
+    # the same fleet with its recording: the second drone and its target are drawn beside the first
+    recorded = _run(two_drones, tmp_path / "recorded")
+    assert recorded.final == pair.final  # the view only watches
+    rows = {}
+    for chunk in RrdReader(tmp_path / "recorded" / "mission.rrd").stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows.get("/world/fleet/uav2", 0) >= pair.frames // 2 - 1, sorted(rows)
+    assert rows.get("/world/fleet/uav2/target", 0) > 0 and "/world/fleet/uav1" not in rows
 
     records = [json.loads(line) for line in (tmp_path / "two" / "decisions.jsonl").read_text().splitlines()]
     by_vehicle = {v: [r for r in records if r["vehicle"] == v] for v in two_drones.vehicles}

@@ -418,6 +418,8 @@ class LockstepMission:
             if self.view.reads_map(t):
                 stages.settle("depth", "truth")
             self.view.frame(t, frame, position, self.map)
+        elif self.view is not None:
+            self.view.fleet_member(t, drone.name, position, self.pipeline.pilots[drone.name].target)
         max_range = self.mission.depth.max_depth
         poses, drone.telemetry = drone.telemetry, []
         fleet = len(self.drones) > 1

@@ -79,6 +79,11 @@ class LockstepView:
             if self.scene.voxels(voxel_map.voxels(*box), t, voxel_map.resolution):
                 self._next_map = t + MAP_PERIOD
 
+    def fleet_member(self, t: float, name: str, position: Sequence[float], target: Sequence[float] | None) -> None:
+        """Another drone of a fleet at one of its camera frames: where it is and where it is going."""
+        self.scene.at(t)
+        self.scene.fleet_member(name, position, target)
+
     def decision(self, t: float, record: Mapping, tick: TickTerms | None = None) -> None:
         """A command's decisions.jsonl record: its waypoint, runner-up and explanation; ``tick``: the
         decision maker's tick that chose it (its A0..A3, on the window it computed)."""
