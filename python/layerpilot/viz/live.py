@@ -199,7 +199,7 @@ class LiveView:
             self.logged["layers"] += 1
         for name, heard in newest.get("fleet", {}).items():
             pose, decision = heard.get("pose"), heard.get("decision")
-            self.scene.at(self._now)
+            self.scene.at(max(m.stamp for m in heard.values()))  # on the other drone's own clock
             self.scene.fleet_member(name, None if pose is None else pose.pose.position,
                                     None if decision is None else decision.waypoint)
             self.logged[f"fleet/{name}"] += 1
