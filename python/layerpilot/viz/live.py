@@ -111,7 +111,7 @@ class LiveView:
         """Another drone's pose or decision: its newest position or target, checked against its key."""
         self._any.set()
         key = str(sample.key_expr)
-        name, topic = key.split("/")[-2:]
+        name, topic = keys.vehicle_of(key), key.rsplit("/", 1)[-1]
         try:
             message = FLEET_TOPICS[topic](sample.payload.to_bytes())
             if message.vehicle != name:
